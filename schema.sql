@@ -1,0 +1,117 @@
+-- seam store schema: the single source of truth for seam.db.
+--
+-- The file is a list of forward migrations. Each starts with a line
+-- `-- @migration N` and is applied, in one transaction, to stores whose
+-- `PRAGMA user_version` is below N; the transaction also sets user_version to
+-- N. A migration, once released, is never edited: changes come as a new one.
+--
+-- Conventions: poses are stored as 7 REALs (x_m, y_m, z_m, qx, qy, qz, qw);
+-- times are UTC ISO-8601 text (`*_at`) or seconds (`*_s`); ids are INTEGER.
+-- Rows that reference a Parquet file go through `files`; a file row is only
+-- committed after the file is durably renamed into place (see store/mod.rs).
+
+-- @migration 1
+CREATE TABLE meta (
+    key   TEXT PRIMARY KEY,
+    value TEXT NOT NULL
+) WITHOUT ROWID;
+
+-- One row per ingested session, numbered 1, 2, ... in ingest order.
+CREATE TABLE sessions (
+    session_id      INTEGER PRIMARY KEY,
+    name            TEXT NOT NULL UNIQUE,
+    content_hash    TEXT NOT NULL UNIQUE,   -- blake3 over the files that define the session
+    source_dir      TEXT NOT NULL,
+    layout          TEXT NOT NULL,          -- kitti | scans-pcd | dynamic-map-benchmark
+    date            TEXT,                   -- from session.toml, as given
+    sensor_model    TEXT,
+    fov_json        TEXT,
+    keyframe_count  INTEGER NOT NULL,
+    point_count     INTEGER NOT NULL,
+    status          TEXT NOT NULL CHECK (status IN ('ingesting', 'complete')),
+    created_at      TEXT NOT NULL,
+    completed_at    TEXT
+);
+
+-- Every immutable Parquet file the store references, with its size and hash
+-- so that `seam check` can prove nothing is missing or altered.
+CREATE TABLE files (
+    file_id     INTEGER PRIMARY KEY,
+    rel_path    TEXT NOT NULL UNIQUE,
+    kind        TEXT NOT NULL,              -- scans | evidence | cleaned_map | ...
+    session_id  INTEGER REFERENCES sessions(session_id),
+    size_bytes  INTEGER NOT NULL,
+    blake3      TEXT NOT NULL,
+    row_count   INTEGER NOT NULL,
+    created_at  TEXT NOT NULL
+);
+
+-- Submaps cut each session's trajectory by travel distance (MATH.md §1).
+CREATE TABLE submaps (
+    submap_id       INTEGER PRIMARY KEY,
+    session_id      INTEGER NOT NULL REFERENCES sessions(session_id),
+    submap_index    INTEGER NOT NULL,       -- 0-based within the session
+    first_keyframe  INTEGER NOT NULL,       -- keyframe_index of its first keyframe
+    last_keyframe   INTEGER NOT NULL,
+    length_m        REAL NOT NULL,          -- odometry travel within the submap
+    UNIQUE (session_id, submap_index)
+);
+
+-- Keyframes: one scan each, with its odometry pose t_session_keyframe.
+CREATE TABLE keyframes (
+    keyframe_id     INTEGER PRIMARY KEY,
+    session_id      INTEGER NOT NULL REFERENCES sessions(session_id),
+    keyframe_index  INTEGER NOT NULL,       -- the scan's index in its session
+    source_file     TEXT NOT NULL,          -- scan file name in the session folder
+    stamp_s         REAL,
+    point_count     INTEGER NOT NULL,
+    scan_file_id    INTEGER NOT NULL REFERENCES files(file_id),
+    scan_row_group  INTEGER NOT NULL,       -- row group of this scan in its Parquet file
+    odom_x_m REAL NOT NULL, odom_y_m REAL NOT NULL, odom_z_m REAL NOT NULL,
+    odom_qx  REAL NOT NULL, odom_qy  REAL NOT NULL, odom_qz  REAL NOT NULL, odom_qw REAL NOT NULL,
+    submap_id       INTEGER REFERENCES submaps(submap_id),
+    UNIQUE (session_id, keyframe_index)
+);
+CREATE INDEX keyframes_by_submap ON keyframes(submap_id);
+
+-- Every optimisation of the pose graph is a new version; nothing is overwritten,
+-- so later steps can tell how each keyframe moved (MATH.md §7).
+CREATE TABLE graph_versions (
+    graph_version   INTEGER PRIMARY KEY,
+    session_id      INTEGER NOT NULL REFERENCES sessions(session_id), -- the ingest that made it
+    mode            TEXT NOT NULL,          -- odometry | fixed | session | submap
+    created_at      TEXT NOT NULL,
+    details_json    TEXT NOT NULL DEFAULT '{}'
+);
+
+-- A_m = t_world_submap per graph version.
+CREATE TABLE anchor_poses (
+    graph_version INTEGER NOT NULL REFERENCES graph_versions(graph_version),
+    submap_id     INTEGER NOT NULL REFERENCES submaps(submap_id),
+    x_m REAL NOT NULL, y_m REAL NOT NULL, z_m REAL NOT NULL,
+    qx  REAL NOT NULL, qy  REAL NOT NULL, qz  REAL NOT NULL, qw REAL NOT NULL,
+    PRIMARY KEY (graph_version, submap_id)
+) WITHOUT ROWID;
+
+-- p_i = t_submap_keyframe per graph version.
+CREATE TABLE local_poses (
+    graph_version INTEGER NOT NULL REFERENCES graph_versions(graph_version),
+    keyframe_id   INTEGER NOT NULL REFERENCES keyframes(keyframe_id),
+    x_m REAL NOT NULL, y_m REAL NOT NULL, z_m REAL NOT NULL,
+    qx  REAL NOT NULL, qy  REAL NOT NULL, qz  REAL NOT NULL, qw REAL NOT NULL,
+    PRIMARY KEY (graph_version, keyframe_id)
+) WITHOUT ROWID;
+
+-- The step log: one row per committed pipeline step of a session's ingest.
+-- A step's row is committed in the same transaction as the step's data, so a
+-- re-run resumes at the first step without a row.
+CREATE TABLE step_log (
+    session_id    INTEGER NOT NULL REFERENCES sessions(session_id),
+    step          TEXT NOT NULL,
+    seq           INTEGER NOT NULL,         -- order of the step in the pipeline
+    started_at    TEXT NOT NULL,
+    finished_at   TEXT NOT NULL,
+    wall_s        REAL NOT NULL,
+    details_json  TEXT NOT NULL DEFAULT '{}',
+    PRIMARY KEY (session_id, step)
+) WITHOUT ROWID;

@@ -1,0 +1,103 @@
+//! The command line: one file per subcommand, exit codes decided once.
+//!
+//! Data goes to stdout, logs and progress to stderr (progress bars only on a
+//! terminal, never with `--quiet`). `--format json` prints machine-readable
+//! results for every command a script may read.
+//!
+//! Exit codes (DESIGN.md): 0 ok, 1 internal or I/O failure, 2 usage (bad
+//! arguments or config file), 3 query error, 4 data error (bad input file,
+//! not a store, store damaged), 5 store busy (another writer).
+
+mod check;
+mod exit;
+mod ingest;
+mod init;
+mod output;
+mod sessions;
+
+use clap::{Parser, Subcommand, ValueEnum};
+use std::path::PathBuf;
+
+pub use exit::{ExitKind, exit_kind};
+
+#[derive(Debug, Parser)]
+#[command(name = "seam", version, about = "Lifelong LiDAR map store: align sessions, remove movers, detect changes, keep the history", long_about = None)]
+pub struct Cli {
+    /// Output format for data on stdout.
+    #[arg(long, global = true, value_enum, default_value_t = Format::Table)]
+    pub format: Format,
+    /// No progress bars or log lines on stderr.
+    #[arg(long, short, global = true)]
+    pub quiet: bool,
+    /// TOML file overriding the default configuration (only the keys it names).
+    #[arg(long, global = true, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Format {
+    Table,
+    Json,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Create a new, empty store.
+    Init(init::InitArgs),
+    /// Add a session folder to a store (validated first; resumable; idempotent).
+    Ingest(ingest::IngestArgs),
+    /// List the sessions of a store.
+    Sessions(sessions::StoreArg),
+    /// Show what a store holds.
+    Info(sessions::StoreArg),
+    /// Verify the store's integrity; --repair removes orphan files.
+    Check(check::CheckArgs),
+}
+
+/// Shared settings resolved once from the global flags.
+pub struct Ctx {
+    pub format: Format,
+    pub quiet: bool,
+    pub config: crate::config::Config,
+}
+
+/// A command-line mistake found after parsing (exit code 2).
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct UsageError(pub String);
+
+/// Runs the command line and returns the process exit code.
+pub fn main() -> std::process::ExitCode {
+    let cli = match Cli::try_parse() {
+        Ok(c) => c,
+        Err(e) => {
+            let _ = e.print();
+            return std::process::ExitCode::from(if e.use_stderr() { ExitKind::Usage as u8 } else { 0 });
+        }
+    };
+    match run(cli) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(err) => {
+            let kind = exit_kind(&err);
+            eprintln!("error: {err:#}");
+            std::process::ExitCode::from(kind as u8)
+        }
+    }
+}
+
+fn run(cli: Cli) -> anyhow::Result<()> {
+    let config = match &cli.config {
+        Some(path) => crate::config::Config::from_file(path)?,
+        None => crate::config::Config::default(),
+    };
+    let ctx = Ctx { format: cli.format, quiet: cli.quiet, config };
+    match cli.command {
+        Command::Init(a) => init::run(&ctx, a),
+        Command::Ingest(a) => ingest::run(&ctx, a),
+        Command::Sessions(a) => sessions::run_sessions(&ctx, a),
+        Command::Info(a) => sessions::run_info(&ctx, a),
+        Command::Check(a) => check::run(&ctx, a),
+    }
+}

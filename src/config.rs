@@ -1,0 +1,113 @@
+//! One `Config`, a sub-struct per stage, defaults in `Default`.
+//!
+//! Running with no config file works; a TOML file overrides only what it
+//! names, and a key seam does not know is an error that names it (a typo must
+//! not silently fall back to a default).
+//!
+//! ```toml
+//! [submap]
+//! submap_length_m = 30.0
+//! ```
+
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Config {
+    pub submap: SubmapConfig,
+    pub ingest: IngestConfig,
+}
+
+/// Submap cutting (MATH.md §1).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SubmapConfig {
+    /// A new submap starts when the travel since the submap's first keyframe
+    /// exceeds this (choice: 20 m).
+    pub submap_length_m: f64,
+    /// A trailing submap shorter than this is merged into the one before it.
+    pub min_keyframes: usize,
+}
+
+impl Default for SubmapConfig {
+    fn default() -> Self {
+        SubmapConfig { submap_length_m: 20.0, min_keyframes: 2 }
+    }
+}
+
+/// Reading and storing scans.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct IngestConfig {
+    /// Scans read in parallel per batch while writing the scans file; bounds
+    /// memory to about this many scans.
+    pub read_batch_scans: usize,
+}
+
+impl Default for IngestConfig {
+    fn default() -> Self {
+        IngestConfig { read_batch_scans: 16 }
+    }
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    #[error("{path}: {source}")]
+    Io { path: PathBuf, source: std::io::Error },
+    #[error("{path}: {message}\n  hint: see the `Config` docs for the keys seam knows; only name what you change")]
+    Parse { path: PathBuf, message: String },
+    #[error("{path}: {message}")]
+    Invalid { path: PathBuf, message: String },
+}
+
+impl Config {
+    /// Reads a TOML file that overrides the defaults it names.
+    pub fn from_file(path: &Path) -> Result<Config, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io { path: path.into(), source })?;
+        Config::from_toml(&text, path)
+    }
+
+    pub fn from_toml(text: &str, path: &Path) -> Result<Config, ConfigError> {
+        let cfg: Config =
+            toml::from_str(text).map_err(|e| ConfigError::Parse { path: path.into(), message: e.to_string() })?;
+        cfg.validate(path)?;
+        Ok(cfg)
+    }
+
+    fn validate(&self, path: &Path) -> Result<(), ConfigError> {
+        let bad = |m: String| Err(ConfigError::Invalid { path: path.into(), message: m });
+        if !(self.submap.submap_length_m > 0.0 && self.submap.submap_length_m.is_finite()) {
+            return bad(format!("submap.submap_length_m = {} must be a positive length", self.submap.submap_length_m));
+        }
+        if self.submap.min_keyframes == 0 {
+            return bad("submap.min_keyframes must be at least 1".into());
+        }
+        if self.ingest.read_batch_scans == 0 {
+            return bad("ingest.read_batch_scans must be at least 1".into());
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn file_overrides_only_what_it_names() {
+        let c = Config::from_toml("[submap]\nsubmap_length_m = 30.0\n", Path::new("c.toml")).unwrap();
+        assert_eq!(c.submap.submap_length_m, 30.0);
+        assert_eq!(c.submap.min_keyframes, SubmapConfig::default().min_keyframes);
+        assert_eq!(c.ingest, IngestConfig::default());
+        assert_eq!(Config::from_toml("", Path::new("c.toml")).unwrap(), Config::default());
+    }
+
+    #[test]
+    fn unknown_keys_and_bad_values_are_errors_naming_them() {
+        let e = Config::from_toml("[submap]\nsubmap_lenght_m = 3\n", Path::new("c.toml")).unwrap_err();
+        assert!(e.to_string().contains("submap_lenght_m"), "{e}");
+        let e = Config::from_toml("[submap]\nsubmap_length_m = -1.0\n", Path::new("c.toml")).unwrap_err();
+        assert!(e.to_string().contains("positive"), "{e}");
+    }
+}

@@ -1,0 +1,34 @@
+//! Geometry: poses, point clouds and voxel keys. No I/O lives here.
+//!
+//! Conventions (MATH.md §0): poses are `SE(3)` in `f64`, named by their
+//! frames (`t_world_submap * t_submap_keyframe == t_world_keyframe`); a point
+//! in frame b moves to frame a by `t_a_b * p_b`. Points themselves are stored
+//! as `f32` in the sensor frame, because that is what sensors deliver and what
+//! halves the memory of a multi-million point session.
+
+mod pose;
+mod voxel;
+
+pub use pose::{
+    Pose, is_finite_pose, orthonormality_error, pose_from_kitti_row, pose_from_tum, pose_to_kitti_row,
+    pose_to_tum_quat, nearest_rotation, MAX_ORTHONORMALITY_ERROR,
+};
+pub use voxel::VoxelKey;
+
+/// A single LiDAR scan in its sensor frame.
+///
+/// `intensity` is either empty (the format had none) or as long as `points`.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Scan {
+    pub points: Vec<[f32; 3]>,
+    pub intensity: Vec<f32>,
+}
+
+impl Scan {
+    pub fn len(&self) -> usize {
+        self.points.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.points.is_empty()
+    }
+}

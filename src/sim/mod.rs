@@ -1,0 +1,1 @@
+//! Simulated construction site (placeholder: filled in by the simulator work).

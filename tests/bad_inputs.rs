@@ -1,0 +1,223 @@
+//! Every bad input of issue 2 (point 4): a clear error naming the file and
+//! the place, the documented exit code, and a store left exactly as it was.
+
+mod common;
+use common::*;
+use std::path::Path;
+
+/// A store holding one good session, and a second good session to corrupt.
+fn setup() -> (tempfile::TempDir, std::path::PathBuf, std::path::PathBuf) {
+    let tmp = tempfile::tempdir().unwrap();
+    let store = tmp.path().join("site.seam");
+    init_store(&store);
+    let good = tmp.path().join("good");
+    write_kitti_session(&good, 4, 500, 1);
+    let o = run(&["ingest", store.to_str().unwrap(), good.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let bad = tmp.path().join("bad");
+    write_kitti_session(&bad, 5, 400, 2);
+    (tmp, store, bad)
+}
+
+/// Runs ingest of `bad` and asserts exit code 4, every fragment in the
+/// message, and an unchanged store.
+fn assert_rejected(store: &Path, bad: &Path, fragments: &[&str]) {
+    let before = store_state(store);
+    let o = run(&["ingest", store.to_str().unwrap(), bad.to_str().unwrap()]);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(4), "expected exit 4 (data error), got {:?}: {err}", o.status.code());
+    for f in fragments {
+        assert!(err.to_lowercase().contains(&f.to_lowercase()), "message lacks {f:?}:\n{err}");
+    }
+    assert!(err.contains("hint:"), "message gives no hint on what to do:\n{err}");
+    assert_same_state(&before, &store_state(store), "after a rejected ingest");
+}
+
+#[test]
+fn bin_size_not_multiple_of_16() {
+    let (_t, store, bad) = setup();
+    let p = bad.join("velodyne/000002.bin");
+    let mut b = std::fs::read(&p).unwrap();
+    b.extend_from_slice(&[1, 2, 3]);
+    std::fs::write(&p, b).unwrap();
+    assert_rejected(&store, &bad, &["000002.bin", "6403 bytes", "multiple of 16"]);
+}
+
+#[test]
+fn nan_coordinate() {
+    let (_t, store, bad) = setup();
+    let p = bad.join("velodyne/000001.bin");
+    let mut b = std::fs::read(&p).unwrap();
+    // point 7, y coordinate
+    b[7 * 16 + 4..7 * 16 + 8].copy_from_slice(&f32::NAN.to_le_bytes());
+    std::fs::write(&p, b).unwrap();
+    assert_rejected(&store, &bad, &["000001.bin", "point 7"]);
+}
+
+#[test]
+fn infinite_pose() {
+    let (_t, store, bad) = setup();
+    let p = bad.join("poses.txt");
+    let text = std::fs::read_to_string(&p).unwrap().replacen("1 0 0 3 ", "1 0 0 inf ", 1);
+    std::fs::write(&p, text).unwrap();
+    assert_rejected(&store, &bad, &["poses.txt", "line 3"]);
+}
+
+#[test]
+fn scan_count_differs_from_pose_count() {
+    let (_t, store, bad) = setup();
+    let p = bad.join("poses.txt");
+    let text: Vec<&str> = std::fs::read_to_string(&p).map(|s| s.leak() as &str).unwrap().lines().collect();
+    std::fs::write(&p, text[..4].join("\n") + "\n").unwrap();
+    assert_rejected(&store, &bad, &["poses.txt", "5", "4"]);
+}
+
+#[test]
+fn non_orthonormal_rotation() {
+    let (_t, store, bad) = setup();
+    let p = bad.join("poses.txt");
+    let text = std::fs::read_to_string(&p).unwrap();
+    let mut lines: Vec<String> = text.lines().map(String::from).collect();
+    lines[1] = "1.2 0 0 1.5 0 1 0 0 0 0 1 0".into();
+    std::fs::write(&p, lines.join("\n") + "\n").unwrap();
+    assert_rejected(&store, &bad, &["poses.txt", "line 2", "rotation"]);
+}
+
+#[test]
+fn empty_scan() {
+    let (_t, store, bad) = setup();
+    std::fs::write(bad.join("velodyne/000003.bin"), b"").unwrap();
+    assert_rejected(&store, &bad, &["000003.bin", "no points"]);
+}
+
+#[test]
+fn unknown_layout() {
+    let (_t, store, _bad) = setup();
+    let odd = store.parent().unwrap().join("odd");
+    std::fs::create_dir_all(odd.join("clouds")).unwrap();
+    std::fs::write(odd.join("clouds/a.xyz"), b"1 2 3\n").unwrap();
+    assert_rejected(&store, &odd, &["odd", "not a session folder", "velodyne", "Scans", "pcd"]);
+}
+
+/// A ScansPcd (ELite / LT-mapper) session with ascii-free binary PCDs.
+fn write_pcd_session(dir: &Path, scans: usize, points: usize) {
+    std::fs::create_dir_all(dir.join("Scans")).unwrap();
+    let mut poses = String::new();
+    for i in 0..scans {
+        let mut f = format!(
+            "# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS x y z intensity\nSIZE 4 4 4 4\nTYPE F F F F\nCOUNT 1 1 1 1\nWIDTH {points}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {points}\nDATA binary\n"
+        )
+        .into_bytes();
+        for k in 0..points {
+            for v in [k as f32 * 0.1, 5.0, (k % 7) as f32, 1.0] {
+                f.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+        std::fs::write(dir.join(format!("Scans/{i:06}.pcd")), f).unwrap();
+        poses.push_str(&format!("1 0 0 {i} 0 1 0 0 0 0 1 0\n"));
+    }
+    std::fs::write(dir.join("poses.txt"), poses).unwrap();
+}
+
+#[test]
+fn pcd_session_ingests() {
+    let (_t, store, _bad) = setup();
+    let pcd = store.parent().unwrap().join("pcd_ok");
+    write_pcd_session(&pcd, 3, 100);
+    let o = run(&["ingest", store.to_str().unwrap(), pcd.to_str().unwrap(), "--format", "json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    assert_eq!(v["layout"], "scans-pcd");
+    assert_eq!(v["points"], 300);
+}
+
+#[test]
+fn truncated_pcd() {
+    let (_t, store, _bad) = setup();
+    let pcd = store.parent().unwrap().join("pcd_trunc");
+    write_pcd_session(&pcd, 3, 100);
+    let p = pcd.join("Scans/000001.pcd");
+    let b = std::fs::read(&p).unwrap();
+    std::fs::write(&p, &b[..b.len() - 50]).unwrap();
+    assert_rejected(&store, &pcd, &["000001.pcd", "byte"]);
+}
+
+#[test]
+fn lying_pcd_header() {
+    let (_t, store, _bad) = setup();
+    let pcd = store.parent().unwrap().join("pcd_lie");
+    write_pcd_session(&pcd, 3, 100);
+    let p = pcd.join("Scans/000002.pcd");
+    let b = std::fs::read(&p).unwrap();
+    let text = String::from_utf8_lossy(&b[..300]).into_owned();
+    let fixed = text.replacen("POINTS 100", "POINTS 120", 1);
+    let mut out = fixed.into_bytes();
+    out.extend_from_slice(&b[300..]);
+    std::fs::write(&p, out).unwrap();
+    assert_rejected(&store, &pcd, &["000002.pcd", "line 10", "POINTS"]);
+}
+
+#[test]
+fn same_session_twice_is_a_no_op() {
+    let tmp = tempfile::tempdir().unwrap();
+    let store = tmp.path().join("site.seam");
+    init_store(&store);
+    let s = tmp.path().join("s");
+    write_kitti_session(&s, 3, 300, 9);
+    assert!(run(&["ingest", store.to_str().unwrap(), s.to_str().unwrap()]).status.success());
+    let before = store_state(&store);
+    let o = run(&["ingest", store.to_str().unwrap(), s.to_str().unwrap(), "--format", "json"]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(stderr(&o).contains("already in the store as session 1"), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    assert_eq!(v["status"], "already_present");
+    assert_eq!(before, store_state(&store));
+}
+
+#[test]
+fn folder_that_is_not_a_store() {
+    let tmp = tempfile::tempdir().unwrap();
+    let s = tmp.path().join("s");
+    write_kitti_session(&s, 2, 100, 3);
+    let o = run(&["ingest", tmp.path().to_str().unwrap(), s.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(4));
+    assert!(stderr(&o).contains("not a seam store"), "{}", stderr(&o));
+    assert!(stderr(&o).contains("seam init"), "{}", stderr(&o));
+    assert!(!tmp.path().join("seam.lock").exists(), "a lock file was left in a non-store folder");
+}
+
+#[test]
+fn store_with_newer_schema() {
+    let (_t, store, bad) = setup();
+    write_kitti_session(&bad, 3, 100, 4);
+    {
+        let c = rusqlite::Connection::open(store.join("seam.db")).unwrap();
+        c.pragma_update(None, "user_version", 999).unwrap();
+    }
+    let before = store_state(&store);
+    let o = run(&["ingest", store.to_str().unwrap(), bad.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(4), "{}", stderr(&o));
+    assert!(stderr(&o).contains("schema version 999 is newer"), "{}", stderr(&o));
+    assert_eq!(before, store_state(&store));
+}
+
+#[test]
+fn busy_store_names_the_writer_pid() {
+    let (_t, store, bad) = setup();
+    let _writer = seam::store::Store::open(&store).unwrap();
+    let o = run(&["ingest", store.to_str().unwrap(), bad.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(5), "{}", stderr(&o));
+    assert!(stderr(&o).contains(&format!("store in use by pid {}", std::process::id())), "{}", stderr(&o));
+    // Readers are not blocked by the writer.
+    let o = run(&["sessions", store.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+}
+
+#[test]
+fn usage_errors_exit_2() {
+    let o = run(&["simulate", "/tmp/x", "--sensor", "kinect"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("os1-64"), "{}", stderr(&o));
+    let o = run(&["frobnicate"]);
+    assert_eq!(o.status.code(), Some(2));
+}
