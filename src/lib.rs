@@ -1,13 +1,48 @@
 //! # seam — a lifelong LiDAR map store
 //!
-//! (crate docs are written as the pipeline lands)
+//! A survey script pushes each new session (a walk or drive with a LiDAR
+//! through a site) into a store; seam validates it, stores every scan and its
+//! odometry pose, cuts the trajectory into submaps, and records each step as
+//! its own transaction. The SEAM paper's later steps — coarse alignment,
+//! inter-session loops accepted by a DOP test, a joint pose graph with submap
+//! anchors, directional ray-casting evidence, dynamic object removal and
+//! change detection — plug into the same step framework (`pipeline`).
+//!
+//! # Layout
+//! - [`geometry`]: SE(3) poses, scans, voxel keys. No I/O.
+//! - [`sensor`]: sensor models and fields of view.
+//! - [`io`]: readers for KITTI `.bin`, PCD, PLY, LAS/LAZ, pose files, and the
+//!   session layouts; validation with errors that name file and place.
+//! - [`pipeline`]: `ingest_session`, one page of named steps.
+//! - [`store`]: the only module that touches SQLite and Parquet.
+//! - [`sim`]: a simulated multi-session construction site with ground truth.
+//! - [`config`]: one `Config`, a sub-struct per stage.
+//! - [`cli`]: the `seam` command line.
+//!
+//! ```no_run
+//! use seam::{config::Config, pipeline, store};
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! let opts = store::InitOptions { site_name: "site".into(), crs: "local".into(), voxel_size_m: 0.2 };
+//! let mut s = store::Store::create("site.seam".as_ref(), &opts)?;
+//! let receipt = pipeline::ingest_session(
+//!     &mut s,
+//!     "survey-2026-11-20".as_ref(),
+//!     &pipeline::IngestOptions::default(),
+//!     &Config::default(),
+//!     &pipeline::NoProgress,
+//! )?;
+//! println!("session {:?}: {} keyframes", receipt.session_id, receipt.keyframes);
+//! # Ok(()) }
+//! ```
 
+pub mod cli;
 pub mod config;
 pub mod fault;
 pub mod geometry;
+pub mod graph;
 pub mod io;
+pub mod pipeline;
+pub mod registration;
 pub mod sensor;
 pub mod sim;
 pub mod store;
-pub mod cli;
-pub mod pipeline;

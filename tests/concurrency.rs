@@ -15,10 +15,10 @@ fn read_only_queries_succeed_during_an_ingest() {
     write_kitti_session(&b, 120, 20_000, 2);
 
     let mut child = seam()
-            .args(["ingest", store.to_str().unwrap(), b.to_str().unwrap()])
-            .stdout(std::process::Stdio::null())
-            .spawn()
-            .unwrap();
+        .args(["ingest", store.to_str().unwrap(), b.to_str().unwrap()])
+        .stdout(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
     let mut during = 0;
     loop {
         let running = child.try_wait().unwrap().is_none();

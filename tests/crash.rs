@@ -34,7 +34,11 @@ fn abort_at_every_fault_point_then_resume() {
 
     // The uninterrupted reference, and the list of fault points it passes.
     let reference = base_store(&tmp.path().join("ref"), &a);
-    let o = seam().args(["ingest", reference.to_str().unwrap(), b.to_str().unwrap()]).env("SEAM_FAULT", "list").output().unwrap();
+    let o = seam()
+        .args(["ingest", reference.to_str().unwrap(), b.to_str().unwrap()])
+        .env("SEAM_FAULT", "list")
+        .output()
+        .unwrap();
     assert!(o.status.success());
     let points: Vec<String> =
         stderr(&o).lines().filter_map(|l| l.strip_prefix("seam-fault-point ")).map(String::from).collect();
@@ -46,7 +50,11 @@ fn abort_at_every_fault_point_then_resume() {
     for point in &points {
         let dir = tmp.path().join(format!("crash-{}", point.replace(':', "-")));
         let store = base_store(&dir, &a);
-        let o = seam().args(["ingest", store.to_str().unwrap(), b.to_str().unwrap()]).env("SEAM_FAULT", point).output().unwrap();
+        let o = seam()
+            .args(["ingest", store.to_str().unwrap(), b.to_str().unwrap()])
+            .env("SEAM_FAULT", point)
+            .output()
+            .unwrap();
         assert!(!o.status.success(), "fault {point} did not stop the ingest");
         assert!(stderr(&o).contains(&format!("injected fault at {point}")), "{}", stderr(&o));
         check_ok(&store);

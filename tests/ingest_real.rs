@@ -71,7 +71,10 @@ fn semantickitti_04_and_08() {
         assert_eq!(v["layout"], "kitti");
         eprintln!(
             "ingest {seq}: {} points in {:.3} s = {:.0} points/s, {:.1} scans/s",
-            v["points"], v["wall_s"].as_f64().unwrap(), v["points_per_s"].as_f64().unwrap(), v["scans_per_s"].as_f64().unwrap()
+            v["points"],
+            v["wall_s"].as_f64().unwrap(),
+            v["points_per_s"].as_f64().unwrap(),
+            v["scans_per_s"].as_f64().unwrap()
         );
     }
     check_sequence(&store, &data.join("semantickitti/04"), 1);

@@ -1,7 +1,7 @@
 //! `seam check site.seam [--repair]`
 
-use super::output::{json, print_json};
 use super::Ctx;
+use super::output::{json, print_json};
 use crate::store::{Store, StoreError};
 use clap::Args;
 use std::path::PathBuf;
@@ -28,7 +28,8 @@ pub fn run(ctx: &Ctx, a: CheckArgs) -> anyhow::Result<()> {
             println!("  bad       {}: {}", b.rel_path, b.problem);
         }
         for o in &report.orphans {
-            let what = if report.removed.contains(o) { "removed" } else { "orphan (run `seam check --repair` to remove)" };
+            let what =
+                if report.removed.contains(o) { "removed" } else { "orphan (run `seam check --repair` to remove)" };
             println!("  {what:<9} {o}");
         }
         for s in &report.incomplete_sessions {

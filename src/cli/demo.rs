@@ -35,20 +35,43 @@ pub fn run(ctx: &Ctx, a: DemoArgs) -> anyhow::Result<()> {
     std::fs::create_dir_all(&a.out)?;
     std::fs::write(a.out.join(MARKER), b"made by seam demo; safe to delete\n")?;
     let t0 = std::time::Instant::now();
-    log(ctx, format!("simulating {} sessions of a construction site ({}, {} keyframes each)...", cfg.sessions, cfg.sensor.name(), cfg.keyframes_per_session));
+    log(
+        ctx,
+        format!(
+            "simulating {} sessions of a construction site ({}, {} keyframes each)...",
+            cfg.sessions,
+            cfg.sensor.name(),
+            cfg.keyframes_per_session
+        ),
+    );
     let sim = simulate_site(ctx, &a.out.join("sessions"), &cfg)?;
     let store_path = a.out.join("site.seam");
-    drop(Store::create(&store_path, &InitOptions { site_name: "demo site".into(), crs: "local".into(), voxel_size_m: 0.2 })?);
+    drop(Store::create(
+        &store_path,
+        &InitOptions { site_name: "demo site".into(), crs: "local".into(), voxel_size_m: 0.2 },
+    )?);
     let mut receipts = Vec::new();
     for s in &sim.sessions {
         let r = super::ingest::ingest_one(ctx, &store_path, &s.dir, None, false)?;
-        log(ctx, format!("ingested {} as session {} ({} keyframes, {} points, {:.1} s)", s.dir.display(), r.session_id.unwrap_or(0), r.keyframes, thousands(r.points), r.wall_s));
+        log(
+            ctx,
+            format!(
+                "ingested {} as session {} ({} keyframes, {} points, {:.1} s)",
+                s.dir.display(),
+                r.session_id.unwrap_or(0),
+                r.keyframes,
+                thousands(r.points),
+                r.wall_s
+            ),
+        );
         receipts.push(r);
     }
     let store = Store::open_read_only(&store_path)?;
     let sessions = store::sessions(store.conn())?;
     if json(ctx) {
-        return print_json(&serde_json::json!({ "store": store_path, "sessions": sessions, "receipts": receipts, "wall_s": t0.elapsed().as_secs_f64() }));
+        return print_json(
+            &serde_json::json!({ "store": store_path, "sessions": sessions, "receipts": receipts, "wall_s": t0.elapsed().as_secs_f64() }),
+        );
     }
     let rows: Vec<Vec<String>> = sessions
         .iter()

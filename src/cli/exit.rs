@@ -3,6 +3,7 @@
 use crate::config::ConfigError;
 use crate::io::ReadError;
 use crate::pipeline::IngestError;
+use crate::sim::SimError;
 use crate::store::StoreError;
 
 /// Process exit codes, as DESIGN.md lists them.
@@ -46,6 +47,12 @@ pub fn exit_kind(err: &anyhow::Error) -> ExitKind {
         }
         if cause.downcast_ref::<ConfigError>().is_some() {
             return ExitKind::Usage;
+        }
+        if let Some(e) = cause.downcast_ref::<SimError>() {
+            return match e {
+                SimError::Config(_) => ExitKind::Usage,
+                _ => ExitKind::Internal,
+            };
         }
         if cause.downcast_ref::<super::UsageError>().is_some() {
             return ExitKind::Usage;

@@ -1,7 +1,7 @@
 //! `seam ingest site.seam SESSION_DIR [--name s4] [--dry-run]`
 
-use super::output::{Bars, json, log, print_json, thousands};
 use super::Ctx;
+use super::output::{Bars, json, log, print_json, thousands};
 use crate::pipeline::{IngestOptions, IngestReceipt, IngestStatus, ingest_session};
 use crate::store::Store;
 use clap::Args;

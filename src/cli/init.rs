@@ -29,8 +29,12 @@ pub fn run(ctx: &Ctx, a: InitArgs) -> anyhow::Result<()> {
         return Err(UsageError(format!("--voxel {} must be a size in metres in (0, 10]", a.voxel)).into());
     }
     let crs = match a.crs {
-        Some(c) if c.to_ascii_uppercase().starts_with("EPSG:") && c[5..].parse::<u32>().is_ok() => c.to_ascii_uppercase(),
-        Some(c) => return Err(UsageError(format!("--crs {c:?} is not of the form EPSG:<code>, e.g. EPSG:32652")).into()),
+        Some(c) if c.to_ascii_uppercase().starts_with("EPSG:") && c[5..].parse::<u32>().is_ok() => {
+            c.to_ascii_uppercase()
+        }
+        Some(c) => {
+            return Err(UsageError(format!("--crs {c:?} is not of the form EPSG:<code>, e.g. EPSG:32652")).into());
+        }
         None => "local".to_string(),
     };
     let site_name = a.name.unwrap_or_else(|| {
@@ -41,7 +45,16 @@ pub fn run(ctx: &Ctx, a: InitArgs) -> anyhow::Result<()> {
     if json(ctx) {
         print_json(&serde_json::json!({ "store": a.store, "meta": meta }))?;
     } else {
-        log(ctx, format!("created {} (site {:?}, crs {}, voxel {} m)", a.store.display(), meta.site_name, meta.crs, meta.voxel_size_m));
+        log(
+            ctx,
+            format!(
+                "created {} (site {:?}, crs {}, voxel {} m)",
+                a.store.display(),
+                meta.site_name,
+                meta.crs,
+                meta.voxel_size_m
+            ),
+        );
     }
     Ok(())
 }

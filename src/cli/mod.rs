@@ -9,11 +9,13 @@
 //! not a store, store damaged), 5 store busy (another writer).
 
 mod check;
+mod demo;
 mod exit;
 mod ingest;
 mod init;
 mod output;
 mod sessions;
+mod simulate;
 
 use clap::{Parser, Subcommand, ValueEnum};
 use std::path::PathBuf;
@@ -54,6 +56,10 @@ pub enum Command {
     Info(sessions::StoreArg),
     /// Verify the store's integrity; --repair removes orphan files.
     Check(check::CheckArgs),
+    /// Write a simulated multi-session construction site with ground truth.
+    Simulate(simulate::SimulateArgs),
+    /// Simulate a site and ingest every session: the whole job on a default.
+    Demo(demo::DemoArgs),
 }
 
 /// Shared settings resolved once from the global flags.
@@ -99,5 +105,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Sessions(a) => sessions::run_sessions(&ctx, a),
         Command::Info(a) => sessions::run_info(&ctx, a),
         Command::Check(a) => check::run(&ctx, a),
+        Command::Simulate(a) => simulate::run(&ctx, a),
+        Command::Demo(a) => demo::run(&ctx, a),
     }
 }

@@ -1,7 +1,7 @@
 //! `seam sessions site.seam` and `seam info site.seam`
 
-use super::output::{json, print_json, print_table, thousands};
 use super::Ctx;
+use super::output::{json, print_json, print_table, thousands};
 use crate::store::{self, Store};
 use clap::Args;
 use std::path::PathBuf;
@@ -61,17 +61,21 @@ pub fn run_info(ctx: &Ctx, a: StoreArg) -> anyhow::Result<()> {
             "bytes_per_million_points": if points > 0 { bytes as f64 * 1e6 / points as f64 } else { 0.0 },
         }));
     }
-    println!("store       {}", a.store.display());
-    println!("site        {}", meta.site_name);
-    println!("crs         {}", meta.crs);
-    println!("voxel       {} m", meta.voxel_size_m);
-    println!("schema      v{} (seam {})", meta.schema_version, meta.tool_version);
-    println!("created     {}", meta.created_at);
+    println!("store           {}", a.store.display());
+    println!("site            {}", meta.site_name);
+    println!("crs             {}", meta.crs);
+    println!("voxel           {} m", meta.voxel_size_m);
+    println!("schema          v{} (seam {})", meta.schema_version, meta.tool_version);
+    println!("created         {}", meta.created_at);
     for (t, n) in counts {
-        println!("{t:<11} {}", thousands(n as u64));
+        println!("{t:<15} {}", thousands(n as u64));
     }
-    println!("points      {}", thousands(points as u64));
-    let per_m = if points > 0 { format!(" ({:.1} MB per million points)", bytes as f64 / points as f64) } else { String::new() };
-    println!("size        {:.1} MB{per_m}", bytes as f64 / 1e6);
+    println!("points          {}", thousands(points as u64));
+    let per_m = if points > 0 {
+        format!(" ({:.1} MB per million points)", bytes as f64 / points as f64)
+    } else {
+        String::new()
+    };
+    println!("size            {:.1} MB{per_m}", bytes as f64 / 1e6);
     Ok(())
 }

@@ -36,7 +36,11 @@ impl SiteArgs {
     pub fn to_config(&self) -> anyhow::Result<SimConfig> {
         let sensor = SensorModel::parse(&self.sensor).ok_or_else(|| {
             let names: Vec<&str> = SensorModel::ALL.iter().map(|m| m.name()).collect();
-            UsageError(format!("--sensor {:?} is not a sensor seam knows; use one of {}", self.sensor, names.join(", ")))
+            UsageError(format!(
+                "--sensor {:?} is not a sensor seam knows; use one of {}",
+                self.sensor,
+                names.join(", ")
+            ))
         })?;
         if self.sessions == 0 || self.keyframes < 2 {
             return Err(UsageError("--sessions must be ≥ 1 and --keyframes ≥ 2".into()).into());
@@ -55,19 +59,18 @@ impl SiteArgs {
 pub fn simulate_site(ctx: &Ctx, out: &Path, cfg: &SimConfig) -> anyhow::Result<SimSummary> {
     let bars = super::output::Bars::new(ctx, "simulate");
     let last = std::sync::Mutex::new(usize::MAX);
-    let progress = |session: usize, done: usize, total: usize| {
+    let progress = |session: usize, _done: usize, total: usize| {
         use crate::pipeline::Progress;
-        if let Ok(mut l) = last.lock() {
-            if *l != session {
-                if *l != usize::MAX {
-                    bars.end();
-                }
-                bars.begin(&format!("session {session}"), total as u64);
-                *l = session;
+        if let Ok(mut l) = last.lock()
+            && *l != session
+        {
+            if *l != usize::MAX {
+                bars.end();
             }
+            bars.begin(&format!("session {session}"), total as u64);
+            *l = session;
         }
         bars.advance(1);
-        let _ = done;
     };
     let summary = simulate(out, cfg, &progress)?;
     crate::pipeline::Progress::end(&bars);
@@ -100,6 +103,14 @@ pub fn run(ctx: &Ctx, a: SimulateArgs) -> anyhow::Result<()> {
             s.final_drift_m
         );
     }
-    log(ctx, format!("simulated {} sessions, {} objects in {:.1} s", summary.sessions.len(), summary.objects, t0.elapsed().as_secs_f64()));
+    log(
+        ctx,
+        format!(
+            "simulated {} sessions, {} objects in {:.1} s",
+            summary.sessions.len(),
+            summary.objects,
+            t0.elapsed().as_secs_f64()
+        ),
+    );
     Ok(())
 }

@@ -10,8 +10,8 @@ mod pose;
 mod voxel;
 
 pub use pose::{
-    Pose, is_finite_pose, orthonormality_error, pose_from_kitti_row, pose_from_tum, pose_to_kitti_row,
-    pose_to_tum_quat, nearest_rotation, MAX_ORTHONORMALITY_ERROR,
+    MAX_ORTHONORMALITY_ERROR, Pose, is_finite_pose, nearest_rotation, orthonormality_error, pose_from_kitti_row,
+    pose_from_tum, pose_to_kitti_row, pose_to_tum_quat,
 };
 pub use voxel::VoxelKey;
 

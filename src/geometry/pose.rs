@@ -52,10 +52,7 @@ pub fn pose_to_kitti_row(p: &Pose) -> [f64; 12] {
     let r = p.rotation.to_rotation_matrix();
     let m = r.matrix();
     let t = p.translation.vector;
-    [
-        m[(0, 0)], m[(0, 1)], m[(0, 2)], t.x, m[(1, 0)], m[(1, 1)], m[(1, 2)], t.y, m[(2, 0)], m[(2, 1)],
-        m[(2, 2)], t.z,
-    ]
+    [m[(0, 0)], m[(0, 1)], m[(0, 2)], t.x, m[(1, 0)], m[(1, 1)], m[(1, 2)], t.y, m[(2, 0)], m[(2, 1)], m[(2, 2)], t.z]
 }
 
 /// Builds a pose from TUM's `x y z qx qy qz qw`.

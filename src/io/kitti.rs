@@ -19,24 +19,21 @@ pub fn read_bin(path: &Path) -> Result<Scan, ReadError> {
 
 /// Decodes the bytes of a `.bin`; `path` only names the file in errors.
 pub(crate) fn parse_bin(path: &Path, bytes: &[u8]) -> Result<Scan, ReadError> {
-    if bytes.len() % 16 != 0 {
+    if !bytes.len().is_multiple_of(16) {
         return Err(ReadError::new(
             ReadErrorKind::NotMultipleOf16,
             path,
-            format!(
-                "file has {} bytes, not a multiple of 16 (float32 x,y,z,intensity per point)",
-                bytes.len()
-            ),
+            format!("file has {} bytes, not a multiple of 16 (float32 x,y,z,intensity per point)", bytes.len()),
         )
         .hint("is it a KITTI .bin? Re-export the scan or remove it and its line in poses.txt"));
     }
     let n = bytes.len() / 16;
     let mut scan = Scan { points: Vec::with_capacity(n), intensity: Vec::with_capacity(n) };
-    for rec in bytes.chunks_exact(16) {
-        // In bounds: `rec` is exactly 16 bytes.
-        let f = |k: usize| f32::from_le_bytes([rec[k], rec[k + 1], rec[k + 2], rec[k + 3]]);
-        scan.points.push([f(0), f(4), f(8)]);
-        scan.intensity.push(f(12));
+    for rec in bytes.as_chunks::<16>().0 {
+        if let [x, y, z, i] = rec.as_chunks::<4>().0 {
+            scan.points.push([x, y, z].map(|b| f32::from_le_bytes(*b)));
+            scan.intensity.push(f32::from_le_bytes(*i));
+        }
     }
     Ok(scan)
 }
@@ -47,7 +44,7 @@ pub(crate) fn parse_bin(path: &Path, bytes: &[u8]) -> Result<Scan, ReadError> {
 /// A size other than `4 × expected_points` is `CountMismatch`.
 pub fn read_labels(path: &Path, expected_points: usize) -> Result<Vec<u32>, ReadError> {
     let bytes = read_bytes(path)?;
-    if bytes.len() % 4 != 0 || bytes.len() / 4 != expected_points {
+    if !bytes.len().is_multiple_of(4) || bytes.len() / 4 != expected_points {
         return Err(ReadError::new(
             ReadErrorKind::CountMismatch,
             path,
@@ -61,7 +58,7 @@ pub fn read_labels(path: &Path, expected_points: usize) -> Result<Vec<u32>, Read
         )
         .hint("labels must be one uint32 per point of the scan with the same file stem; is it the right sequence?"));
     }
-    Ok(bytes.chunks_exact(4).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect())
+    Ok(bytes.as_chunks::<4>().0.iter().map(|b| u32::from_le_bytes(*b)).collect())
 }
 
 /// Reads the `Tr:` line of a KITTI `calib.txt` (velodyne → camera, 3×4), if any.

@@ -119,7 +119,8 @@ mod tests {
         writer.into_inner().unwrap().into_inner()
     }
 
-    const PTS: [[f64; 3]; 3] = [[600_001.5, 5_000_002.25, 10.0], [600_100.0, 5_000_100.125, -3.5], [600_000.0, 5_000_000.0, 0.0]];
+    const PTS: [[f64; 3]; 3] =
+        [[600_001.5, 5_000_002.25, 10.0], [600_100.0, 5_000_100.125, -3.5], [600_000.0, 5_000_000.0, 0.0]];
 
     fn read(bytes: Vec<u8>) -> Result<(Vec<[f64; 3]>, Vec<u16>), ReadError> {
         let len = bytes.len() as u64;
@@ -163,6 +164,14 @@ mod tests {
     }
 
     proptest! {
+        #[test]
+        fn flipped_bytes_never_panic(at in any::<prop::sample::Index>(), byte in any::<u8>()) {
+            let mut b = las_bytes(&PTS);
+            let i = at.index(b.len());
+            b[i] = byte;
+            let _ = read(b);
+        }
+
         #[test]
         fn truncations_never_panic(frac in 0.0f64..1.0) {
             let full = las_bytes(&PTS);

@@ -141,14 +141,12 @@ pub fn detect_session(dir: &Path) -> Result<SessionSource, ReadError> {
     Ok(SessionSource { dir: dir.to_path_buf(), layout, keyframes, meta, definition_files })
 }
 
+/// A keyframe's odometry pose and time stamp, as read.
+type Odometry = (Pose, Option<f64>);
+
 /// Poses (and stamps) from the pose file of a Kitti or ScansPcd folder, with
 /// the definition files read so far.
-#[allow(clippy::type_complexity)]
-fn file_poses(
-    dir: &Path,
-    layout: Layout,
-    scans: &[PathBuf],
-) -> Result<(Vec<PathBuf>, Vec<(Pose, Option<f64>)>), ReadError> {
+fn file_poses(dir: &Path, layout: Layout, scans: &[PathBuf]) -> Result<(Vec<PathBuf>, Vec<Odometry>), ReadError> {
     let candidates: &[&str] = match layout {
         Layout::Kitti => &["poses.txt", "poses_tum.txt"],
         _ => &["optimized_poses.txt", "poses.txt"],
@@ -165,7 +163,7 @@ fn file_poses(
     let mut files = vec![pose_path.clone()];
     let columns = pose_file_columns(&pose_path)?;
     let is_tum = columns == 8 || (columns == 0 && pose_path.ends_with("poses_tum.txt"));
-    let mut poses: Vec<(Pose, Option<f64>)> = if is_tum {
+    let mut poses: Vec<Odometry> = if is_tum {
         read_tum_poses(&pose_path)?.into_iter().map(|(t, p)| (p, Some(t))).collect()
     } else {
         read_kitti_poses(&pose_path)?.into_iter().map(|p| (p, None)).collect()
@@ -203,10 +201,12 @@ fn check_count(path: &Path, n: usize, what: &str, sub: &str, ext: &str, scans: u
         path,
         format!("{file} has {n} {what} but {sub}/ has {scans} .{ext} scans"),
     )
-    .hint(format!("{file} needs exactly one line per scan in {sub}/, in file-name order; remove the extra scans or lines")))
+    .hint(format!(
+        "{file} needs exactly one line per scan in {sub}/, in file-name order; remove the extra scans or lines"
+    )))
 }
 
-fn viewpoint_pose(path: &Path) -> Result<(Pose, Option<f64>), ReadError> {
+fn viewpoint_pose(path: &Path) -> Result<Odometry, ReadError> {
     match read_viewpoint(path)? {
         Some(p) => Ok((p, None)),
         None => Err(ReadError::new(ReadErrorKind::BadHeader, path, "PCD header has no VIEWPOINT line")
@@ -262,15 +262,11 @@ fn unknown_layout(dir: &Path) -> ReadError {
     found.sort();
     let listing = match found.len() {
         0 => "an empty folder".to_string(),
-        n if n > 12 => format!("{}, … ({n} entries)", found[..12].join(", ")),
+        n if n > 12 => format!("{}, … ({n} entries)", found.iter().take(12).cloned().collect::<Vec<_>>().join(", ")),
         _ => found.join(", "),
     };
-    ReadError::new(
-        ReadErrorKind::UnknownLayout,
-        dir,
-        format!("not a session folder seam recognises; found: {listing}"),
-    )
-    .hint(ACCEPTED)
+    ReadError::new(ReadErrorKind::UnknownLayout, dir, format!("not a session folder seam recognises; found: {listing}"))
+        .hint(ACCEPTED)
 }
 
 /// Scan `i` of a session in the sensor frame, validated (non-empty, finite).

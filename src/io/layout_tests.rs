@@ -28,7 +28,8 @@ fn pose_line(p: &Pose) -> String {
 /// A KITTI folder with `n` scans of 2 points, poses moving 1 m along z.
 fn kitti_dir(n: usize) -> (tempfile::TempDir, Vec<Pose>) {
     let dir = tempfile::tempdir().unwrap();
-    let poses: Vec<Pose> = (0..n).map(|i| Pose::new(Vector3::new(0.1, 0.0, i as f64), Vector3::new(0.0, 0.02 * i as f64, 0.0))).collect();
+    let poses: Vec<Pose> =
+        (0..n).map(|i| Pose::new(Vector3::new(0.1, 0.0, i as f64), Vector3::new(0.0, 0.02 * i as f64, 0.0))).collect();
     for i in 0..n {
         put(dir.path(), &format!("velodyne/{i:06}.bin"), bin(&[[1.0, 2.0, 3.0, 0.5], [4.0, 5.0, 6.0, 0.25]]));
     }
@@ -64,7 +65,15 @@ fn kitti_with_calib_times_labels_and_toml() {
         src.definition_files.iter().map(|p| p.strip_prefix(d).unwrap().display().to_string()).collect();
     assert_eq!(
         names,
-        ["poses.txt", "calib.txt", "times.txt", "session.toml", "velodyne/000000.bin", "velodyne/000001.bin", "velodyne/000002.bin"]
+        [
+            "poses.txt",
+            "calib.txt",
+            "times.txt",
+            "session.toml",
+            "velodyne/000000.bin",
+            "velodyne/000001.bin",
+            "velodyne/000002.bin"
+        ]
     );
     let scan = read_session_scan(&src, 2).unwrap();
     assert_eq!(scan.points, vec![[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]]);

@@ -104,7 +104,8 @@ fn parse_fov(table: toml::Table) -> Result<Fov, String> {
     if let Some(k) = table.keys().find(|k| !allowed.contains(&k.as_str())) {
         return Err(format!("unknown key `{k}` in fov (expected {})", allowed.join(", ")));
     }
-    let fov: Fov = toml::Value::Table(table).try_into().map_err(|e: toml::de::Error| format!("fov: {}", e.message()))?;
+    let fov: Fov =
+        toml::Value::Table(table).try_into().map_err(|e: toml::de::Error| format!("fov: {}", e.message()))?;
     let ok = match fov {
         Fov::Band { elev_min_deg: lo, elev_max_deg: hi } => {
             lo.is_finite() && hi.is_finite() && -90.0 <= lo && lo < hi && hi <= 90.0
@@ -132,8 +133,10 @@ mod tests {
         assert_eq!(m.date.as_deref(), Some("2026-11-20"));
         assert_eq!(m.sensor_model, Some(SensorModel::Os1_64));
         assert_eq!(m.fov, Some(SensorModel::Os1_64.fov()));
-        let m = parse("date = \"2026-11-20\"\n[sensor]\nfov = { kind = \"band\", elev_min_deg = -30, elev_max_deg = 10 }\n")
-            .unwrap();
+        let m = parse(
+            "date = \"2026-11-20\"\n[sensor]\nfov = { kind = \"band\", elev_min_deg = -30, elev_max_deg = 10 }\n",
+        )
+        .unwrap();
         assert_eq!(m.date.as_deref(), Some("2026-11-20"));
         assert_eq!(m.fov, Some(Fov::Band { elev_min_deg: -30.0, elev_max_deg: 10.0 }));
         assert_eq!(parse("").unwrap(), SessionMeta::default());
@@ -152,8 +155,16 @@ mod tests {
         assert_err("name = \"s3\"\n[sensor]\nmodel = \"os1-64\"\nbeams = 64\n", 4, "beams");
         assert_err("name = \"s3\"\n[sensor]\nmodel = \"kinect\"\n", 3, "unknown sensor model `kinect`");
         assert_err("\ndate = \"last tuesday\"\n", 2, "not a date");
-        assert_err("[sensor]\nfov = { kind = \"band\", elev_min_deg = 10, elev_max_deg = -10 }\n", 2, "not a field of view");
-        assert_err("[sensor]\nfov = { kind = \"band\", elev_min = 10, elev_max_deg = 20 }\n", 2, "unknown key `elev_min`");
+        assert_err(
+            "[sensor]\nfov = { kind = \"band\", elev_min_deg = 10, elev_max_deg = -10 }\n",
+            2,
+            "not a field of view",
+        );
+        assert_err(
+            "[sensor]\nfov = { kind = \"band\", elev_min = 10, elev_max_deg = 20 }\n",
+            2,
+            "unknown key `elev_min`",
+        );
         assert_err("[sensor]\nfov = { kind = \"cone\" }\n", 2, "\"cone\"");
         assert_err("name = \n", 1, "");
     }

@@ -24,7 +24,8 @@
 //! - `meta.rs`: `session.toml` → [`SessionMeta`]
 //! - `poses.rs`: KITTI 3×4 and TUM pose files
 //! - `kitti.rs`: KITTI `.bin` scans, SemanticKITTI `.label`, `calib.txt`, `times.txt`
-//! - `pcd.rs`: PCD v0.7 ascii / binary / binary_compressed (hand-written; why in its doc)
+//! - `pcd.rs` (+ `pcd_header.rs`): PCD v0.7 ascii / binary / binary_compressed
+//!   (hand-written; why in its doc)
 //! - `ply.rs`: PLY ascii and binary
 //! - `las.rs`: LAS / LAZ / COPC (and the `f64` precision note)
 

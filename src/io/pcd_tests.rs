@@ -6,8 +6,11 @@ use proptest::prelude::*;
 use std::fs;
 use std::path::PathBuf;
 
+/// One field: name, SIZE, TYPE, COUNT.
+type Spec = (&'static str, usize, char, usize);
+
 /// FIELDS x y z intensity ring time n, SIZE 4 4 8 2 1 8 4, COUNT 1 1 1 1 1 1 3.
-const SPEC: [(&str, usize, char, usize); 7] = [
+const SPEC: [Spec; 7] = [
     ("x", 4, 'F', 1),
     ("y", 4, 'F', 1),
     ("z", 8, 'F', 1),
@@ -42,7 +45,7 @@ fn encode(v: f64, size: usize, kind: char) -> Vec<u8> {
 }
 
 fn header(data: &str, n: usize, viewpoint: &str) -> String {
-    let col = |f: &dyn Fn(&(&str, usize, char, usize)) -> String| SPEC.iter().map(f).collect::<Vec<_>>().join(" ");
+    let col = |f: &dyn Fn(&Spec) -> String| SPEC.iter().map(f).collect::<Vec<_>>().join(" ");
     format!(
         "# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS {}\nSIZE {}\nTYPE {}\nCOUNT {}\n\
          WIDTH {n}\nHEIGHT 1\nVIEWPOINT {viewpoint}\nPOINTS {n}\nDATA {data}\n",
@@ -62,7 +65,9 @@ fn pcd_bytes(data: &str, n: usize) -> Vec<u8> {
                 let line: Vec<String> = values(i)
                     .iter()
                     .zip(SPEC)
-                    .flat_map(|(vs, s)| vs.iter().map(move |&v| if s.1 == 4 { format!("{}", v as f32) } else { format!("{v}") }))
+                    .flat_map(|(vs, s)| {
+                        vs.iter().map(move |&v| if s.1 == 4 { format!("{}", v as f32) } else { format!("{v}") })
+                    })
                     .collect();
                 out.extend_from_slice(line.join(" ").as_bytes());
                 out.push(b'\n');
@@ -206,7 +211,7 @@ fn truncated_data_is_truncated_at_the_file_end() {
         assert!(e.to_string().contains(&format!("cut_{data}.pcd:byte {}: ", cut.len())), "{e}");
     }
     let e = parse_pcd(Path::new("b.pcd"), &pcd_bytes("binary", 50)[..600]).unwrap_err();
-    assert!(e.message.contains("header says 50 points × 41 bytes = 2050 bytes"), "{e}");
+    assert!(e.message.contains("header says 50 points × 39 bytes = 1950 bytes"), "{e}");
 }
 
 #[test]
@@ -216,15 +221,15 @@ fn compressed_size_lie_is_bad_header_at_byte() {
     b[start + 4..start + 8].copy_from_slice(&999u32.to_le_bytes());
     let e = parse_pcd(Path::new("c.pcd"), &b).unwrap_err();
     assert_eq!((e.kind(), e.location), (ReadErrorKind::BadHeader, Some(Location::Byte(start as u64 + 4))), "{e}");
-    // A claim of 4 GB from a 3-byte block is rejected before allocating it.
+    // A claim of 3.9 GB from a 3-byte block is rejected before allocating it.
     let h = header("binary_compressed", 100_000_000, "0 0 0 1 0 0 0");
     let mut b = h.clone().into_bytes();
     b.extend(3u32.to_le_bytes());
-    b.extend(4_100_000_000u32.to_le_bytes());
+    b.extend(3_900_000_000u32.to_le_bytes());
     b.extend([0, 0, 0]);
     let e = parse_pcd(Path::new("c.pcd"), &b).unwrap_err();
     assert_eq!(e.kind(), ReadErrorKind::Parse, "{e}");
-    assert!(e.message.contains("3 bytes cannot unpack to 4100000000"), "{e}");
+    assert!(e.message.contains("3 bytes cannot unpack to 3900000000"), "{e}");
 }
 
 #[test]

@@ -111,9 +111,7 @@ pub(crate) fn parse_ply(path: &Path, bytes: &[u8]) -> Result<Scan, ReadError> {
         let found: Vec<&str> = header.elements.keys().map(String::as_str).collect();
         return Err(bad_header(path, None, format!("no `element vertex` (elements: {})", found.join(", "))));
     };
-    let scalar = |n: &str| {
-        vdef.properties.get(n).is_some_and(|p| matches!(p.data_type, PropertyType::Scalar(_)))
-    };
+    let scalar = |n: &str| vdef.properties.get(n).is_some_and(|p| matches!(p.data_type, PropertyType::Scalar(_)));
     if let Some(axis) = ["x", "y", "z"].into_iter().find(|a| !scalar(a)) {
         let props: Vec<&str> = vdef.properties.keys().map(String::as_str).collect();
         let msg = format!("vertex has no scalar property `{axis}` (properties: {})", props.join(", "));
@@ -207,7 +205,8 @@ mod tests {
 
     #[test]
     fn missing_coordinate_is_bad_header() {
-        let b = String::from_utf8(ply("ascii", "float", "i", 3)).unwrap().replace("property float z", "property float w");
+        let b =
+            String::from_utf8(ply("ascii", "float", "i", 3)).unwrap().replace("property float z", "property float w");
         let e = parse_ply(Path::new("noz.ply"), b.as_bytes()).unwrap_err();
         assert_eq!(e.kind(), ReadErrorKind::BadHeader, "{e}");
         assert!(e.to_string().starts_with("noz.ply: vertex has no scalar property `z`"), "{e}");

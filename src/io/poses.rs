@@ -203,7 +203,11 @@ mod tests {
     #[test]
     fn tum_poses_read_and_validate() {
         let dir = tempfile::tempdir().unwrap();
-        let p = write(&dir, "poses_tum.txt", "# t x y z qx qy qz qw\n0.5 1 2 3 0 0 0 1\n0.6 1 2 3 0 0 0.7071068 0.7071068\n");
+        let p = write(
+            &dir,
+            "poses_tum.txt",
+            "# t x y z qx qy qz qw\n0.5 1 2 3 0 0 0 1\n0.6 1 2 3 0 0 0.7071068 0.7071068\n",
+        );
         let poses = read_tum_poses(&p).unwrap();
         assert_eq!(poses.len(), 2);
         assert_eq!(poses[0].0, 0.5);

@@ -180,12 +180,22 @@ pub fn ingest_session(
     };
     for (seq, step) in STEPS.iter().enumerate() {
         if done.iter().any(|d| d == step.name) {
-            receipt.steps.push(StepReceipt { step: step.name.into(), ran: false, wall_s: 0.0, details: serde_json::Value::Null });
+            receipt.steps.push(StepReceipt {
+                step: step.name.into(),
+                ran: false,
+                wall_s: 0.0,
+                details: serde_json::Value::Null,
+            });
             continue;
         }
         let ts = Instant::now();
         let details = (step.run)(&mut ctx, step.name, seq as i64)?;
-        receipt.steps.push(StepReceipt { step: step.name.into(), ran: true, wall_s: ts.elapsed().as_secs_f64(), details });
+        receipt.steps.push(StepReceipt {
+            step: step.name.into(),
+            ran: true,
+            wall_s: ts.elapsed().as_secs_f64(),
+            details,
+        });
     }
     let session: SessionId = ctx.session.ok_or_else(|| StoreError::Corrupt {
         path: ctx.store.root().to_path_buf(),

@@ -89,7 +89,8 @@ fn store_scans(ctx: &mut StepCtx<'_>, step: &'static str, seq: i64) -> Result<Va
     ctx.progress.begin("store scans", n as u64);
     for start in (0..n).step_by(batch) {
         let end = (start + batch).min(n);
-        let scans = (start..end).into_par_iter().map(|i| read_session_scan(ctx.src, i)).collect::<Result<Vec<_>, _>>()?;
+        let scans =
+            (start..end).into_par_iter().map(|i| read_session_scan(ctx.src, i)).collect::<Result<Vec<_>, _>>()?;
         for (i, scan) in (start..end).zip(scans) {
             let row_group = writer.write_scan(&scan)?;
             let k = &ctx.src.keyframes[i];
@@ -164,8 +165,10 @@ fn initial_graph(ctx: &mut StepCtx<'_>, step: &'static str, seq: i64) -> Result<
     let mut anchors: Vec<(SubmapId, Pose)> = Vec::with_capacity(submaps.len());
     let mut locals: Vec<(KeyframeId, Pose)> = Vec::with_capacity(kfs.len());
     for sm in &submaps {
-        let members: Vec<_> =
-            kfs.iter().filter(|k| k.keyframe_index >= sm.first_keyframe && k.keyframe_index <= sm.last_keyframe).collect();
+        let members: Vec<_> = kfs
+            .iter()
+            .filter(|k| k.keyframe_index >= sm.first_keyframe && k.keyframe_index <= sm.last_keyframe)
+            .collect();
         let Some(first) = members.first() else { continue };
         let t_world_submap = first.t_session_keyframe;
         anchors.push((sm.submap_id, t_world_submap));

@@ -80,7 +80,13 @@ impl Store {
             .map_err(|e| sql(&root, e))?;
         let mut fk = conn.prepare("PRAGMA foreign_key_check").map_err(|e| sql(&root, e))?;
         let fk_rows: Vec<String> = fk
-            .query_map([], |r| Ok(format!("foreign key violation in {} rowid {:?}", r.get::<_, String>(0)?, r.get::<_, Option<i64>>(1)?)))
+            .query_map([], |r| {
+                Ok(format!(
+                    "foreign key violation in {} rowid {:?}",
+                    r.get::<_, String>(0)?,
+                    r.get::<_, Option<i64>>(1)?
+                ))
+            })
             .map_err(|e| sql(&root, e))?
             .collect::<Result<_, _>>()
             .map_err(|e| sql(&root, e))?;
@@ -89,7 +95,9 @@ impl Store {
             report.sqlite.extend(fk_rows);
         }
 
-        let mut st = conn.prepare("SELECT rel_path, size_bytes, blake3 FROM files ORDER BY rel_path").map_err(|e| sql(&root, e))?;
+        let mut st = conn
+            .prepare("SELECT rel_path, size_bytes, blake3 FROM files ORDER BY rel_path")
+            .map_err(|e| sql(&root, e))?;
         let files: Vec<(String, i64, String)> = st
             .query_map([], |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?)))
             .map_err(|e| sql(&root, e))?

@@ -118,7 +118,8 @@ impl ScanWriter {
                 .set_column_dictionary_enabled(col.clone(), false)
                 .set_column_encoding(col, Encoding::BYTE_STREAM_SPLIT);
         }
-        let sink = HashingWriter { inner: BufWriter::with_capacity(1 << 20, file), hasher: blake3::Hasher::new(), bytes: 0 };
+        let sink =
+            HashingWriter { inner: BufWriter::with_capacity(1 << 20, file), hasher: blake3::Hasher::new(), bytes: 0 };
         let writer = ArrowWriter::try_new(sink, scan_schema(), Some(props.build()))
             .map_err(|e| StoreError::Parquet { path: tmp_path.clone(), message: e.to_string() })?;
         Ok(ScanWriter { tmp_path, final_path, rel_path: rel_path.to_string(), writer, row_groups: 0, rows: 0 })
@@ -126,7 +127,8 @@ impl ScanWriter {
 
     /// Appends one scan as its own row group and returns the row-group index.
     pub fn write_scan(&mut self, scan: &Scan) -> Result<usize, StoreError> {
-        let col = |f: fn(&[f32; 3]) -> f32| Arc::new(Float32Array::from_iter_values(scan.points.iter().map(f))) as ArrayRef;
+        let col =
+            |f: fn(&[f32; 3]) -> f32| Arc::new(Float32Array::from_iter_values(scan.points.iter().map(f))) as ArrayRef;
         let intensity: ArrayRef = if scan.intensity.len() == scan.points.len() {
             Arc::new(Float32Array::from(scan.intensity.clone()))
         } else {
@@ -148,9 +150,8 @@ impl ScanWriter {
     /// Closes the file and publishes it: fsync, rename, fsync the folder.
     pub fn finish(self) -> Result<FileRecord, StoreError> {
         let ScanWriter { tmp_path, final_path, rel_path, writer, rows, .. } = self;
-        let mut sink = writer
-            .into_inner()
-            .map_err(|e| StoreError::Parquet { path: tmp_path.clone(), message: e.to_string() })?;
+        let mut sink =
+            writer.into_inner().map_err(|e| StoreError::Parquet { path: tmp_path.clone(), message: e.to_string() })?;
         sink.flush().map_err(|e| StoreError::io(&tmp_path, e))?;
         let HashingWriter { inner, hasher, bytes } = sink;
         let file = inner.into_inner().map_err(|e| StoreError::io(&tmp_path, e.into_error()))?;

@@ -56,7 +56,9 @@ pub enum StoreError {
     NewerSchema { path: PathBuf, found: i64, supported: i64 },
     #[error("{path}: {DB_FILE} is not a seam database ({reason})\n  hint: is this the right folder?")]
     NotSeamDb { path: PathBuf, reason: String },
-    #[error("{path}: store in use by pid {pid}\n  hint: wait for that seam process to finish (one writer at a time; readers are fine)")]
+    #[error(
+        "{path}: store in use by pid {pid}\n  hint: wait for that seam process to finish (one writer at a time; readers are fine)"
+    )]
     Busy { path: PathBuf, pid: String },
     #[error("{path}: {source}")]
     Io { path: PathBuf, source: std::io::Error },
@@ -276,10 +278,8 @@ fn acquire_lock(root: &Path) -> Result<File, StoreError> {
 
 /// Current UTC time as ISO-8601 with seconds, e.g. `2026-11-23T19:25:25Z`.
 pub fn now_utc() -> String {
-    let secs = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map(|d| d.as_secs() as i64)
-        .unwrap_or(0);
+    let secs =
+        std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_secs() as i64).unwrap_or(0);
     format_utc(secs)
 }
 

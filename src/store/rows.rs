@@ -353,11 +353,7 @@ pub fn latest_graph_version(conn: &Connection) -> Result<Option<i64>, StoreError
 }
 
 /// World poses `A_m · p_i` of every keyframe of a session in a graph version.
-pub fn world_poses(
-    conn: &Connection,
-    graph_version: i64,
-    session: SessionId,
-) -> Result<Vec<(i64, Pose)>, StoreError> {
+pub fn world_poses(conn: &Connection, graph_version: i64, session: SessionId) -> Result<Vec<(i64, Pose)>, StoreError> {
     let mut st = conn
         .prepare(
             "SELECT k.keyframe_index,
@@ -370,9 +366,7 @@ pub fn world_poses(
         )
         .map_err(e(conn))?;
     let rows = st
-        .query_map(params![graph_version, session.0], |r| {
-            Ok((r.get::<_, i64>(0)?, pose_at(r, 1)? * pose_at(r, 8)?))
-        })
+        .query_map(params![graph_version, session.0], |r| Ok((r.get::<_, i64>(0)?, pose_at(r, 1)? * pose_at(r, 8)?)))
         .map_err(e(conn))?;
     rows.collect::<Result<_, _>>().map_err(e(conn))
 }

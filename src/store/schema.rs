@@ -33,10 +33,8 @@ pub fn user_version(conn: &Connection, root: &Path) -> Result<i64, StoreError> {
 
 /// Refuses databases written by a newer seam, or that are not seam's at all.
 pub fn check_version(conn: &Connection, root: &Path) -> Result<(), StoreError> {
-    let v = user_version(conn, root).map_err(|e| StoreError::NotSeamDb {
-        path: root.to_path_buf(),
-        reason: e.to_string(),
-    })?;
+    let v = user_version(conn, root)
+        .map_err(|e| StoreError::NotSeamDb { path: root.to_path_buf(), reason: e.to_string() })?;
     if v > SCHEMA_VERSION {
         return Err(StoreError::NewerSchema { path: root.to_path_buf(), found: v, supported: SCHEMA_VERSION });
     }

@@ -1,0 +1,207 @@
+//! Global map-to-map registration on simulated sessions: simulates a
+//! two-session site per seed, merges each session's keyframes into a map by
+//! its odometry, registers session 2's map to session 1's and prints one JSON
+//! object per seed (truth, estimate, errors, verdict, evidence, timings).
+//! Driven by `bench/global_vs_kiss_matcher.py`, which runs KISS-Matcher on
+//! the maps written with `--out`.
+//!
+//! ```text
+//! cargo run --release --example global_bench -- [--seeds 1-10] [--sensor os1-64] [--keyframes 60]
+//!     [--spacing 1.0] [--every 2] [--map-voxel 0.2] [--threads 2] [--out DIR]
+//! ```
+//!
+//! With `--out DIR`, `DIR/seed_NN/{target,source}.bin` hold the maps (f32 x y z,
+//! voxel centroids at `--map-voxel`) and `DIR/seed_NN/truth.txt` the true
+//! `t_target_source` (KITTI 3×4); the simulations themselves are deleted.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Instant;
+
+use seam::geometry::Pose;
+use seam::registration::downsample::voxel_downsample;
+use seam::registration::global::{GlobalConfig, register_maps};
+use seam::sensor::SensorModel;
+use seam::sim::{SimConfig, simulate};
+
+struct Args {
+    seeds: Vec<u64>,
+    sensor: SensorModel,
+    keyframes: usize,
+    spacing: f64,
+    every: usize,
+    map_voxel: f64,
+    threads: usize,
+    out: Option<PathBuf>,
+}
+
+fn parse_seeds(s: &str) -> Result<Vec<u64>, String> {
+    let mut out = Vec::new();
+    for part in s.split(',') {
+        let bad = |_| format!("--seeds: cannot read {part:?} (use 1-10 or 1,4,7)");
+        match part.split_once('-') {
+            Some((a, b)) => out.extend(a.parse::<u64>().map_err(bad)?..=b.parse::<u64>().map_err(bad)?),
+            None => out.push(part.parse().map_err(bad)?),
+        }
+    }
+    Ok(out)
+}
+
+fn parse_args() -> Result<Args, String> {
+    let mut a = Args {
+        seeds: (1..=10).collect(),
+        sensor: SensorModel::Os1_64,
+        keyframes: 60,
+        spacing: 1.0,
+        every: 2,
+        map_voxel: 0.2,
+        threads: 2,
+        out: None,
+    };
+    let mut it = std::env::args().skip(1);
+    while let Some(arg) = it.next() {
+        let val = it.next().ok_or(format!("{arg} needs a value"))?;
+        let num = |v: &str| v.parse::<f64>().map_err(|e| format!("{arg}: {e}"));
+        match arg.as_str() {
+            "--seeds" => a.seeds = parse_seeds(&val)?,
+            "--sensor" => a.sensor = SensorModel::parse(&val).ok_or(format!("unknown sensor {val}"))?,
+            "--keyframes" => a.keyframes = num(&val)? as usize,
+            "--spacing" => a.spacing = num(&val)?,
+            "--every" => a.every = (num(&val)? as usize).max(1),
+            "--map-voxel" => a.map_voxel = num(&val)?,
+            "--threads" => a.threads = num(&val)? as usize,
+            "--out" => a.out = Some(PathBuf::from(val)),
+            _ => return Err(format!("unknown option {arg}")),
+        }
+    }
+    Ok(a)
+}
+
+/// A session's keyframes merged by odometry (every `every`-th), voxel centroids.
+fn session_map(dir: &Path, every: usize, voxel: f64) -> Result<Vec<[f32; 3]>, String> {
+    let src = seam::io::detect_session(dir).map_err(|e| e.to_string())?;
+    let mut pts: Vec<[f64; 3]> = Vec::new();
+    for kf in src.keyframes.iter().step_by(every) {
+        let scan = seam::io::read_session_scan(&src, kf.index).map_err(|e| e.to_string())?;
+        let t = kf.t_session_sensor;
+        pts.extend(scan.points.iter().map(|p| {
+            let q = t * nalgebra::Point3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+            [q.x, q.y, q.z]
+        }));
+    }
+    Ok(voxel_downsample(&pts, voxel, true).iter().map(|p| [p[0] as f32, p[1] as f32, p[2] as f32]).collect())
+}
+
+fn read_single_pose(path: &Path) -> Result<Pose, String> {
+    let poses = seam::io::read_kitti_poses(path).map_err(|e| e.to_string())?;
+    poses.first().copied().ok_or(format!("{}: no pose", path.display()))
+}
+
+fn kitti_row(p: &Pose) -> String {
+    seam::geometry::pose_to_kitti_row(p).iter().map(|v| format!("{v:.9}")).collect::<Vec<_>>().join(" ")
+}
+
+fn write_bin(path: &Path, pts: &[[f32; 3]]) -> Result<(), String> {
+    let bytes: Vec<u8> = pts.iter().flat_map(|p| p.iter().flat_map(|c| c.to_le_bytes())).collect();
+    std::fs::write(path, bytes).map_err(|e| format!("{}: {e}", path.display()))
+}
+
+fn run_seed(a: &Args, seed: u64, work: &Path) -> Result<serde_json::Value, String> {
+    let sim_dir = work.join(format!("sim_{seed:02}"));
+    let cfg = SimConfig {
+        sessions: 2,
+        sensor: a.sensor,
+        seed,
+        keyframes_per_session: a.keyframes,
+        keyframe_spacing_m: a.spacing,
+        ..SimConfig::default()
+    };
+    let t0 = Instant::now();
+    simulate(&sim_dir, &cfg, &|_, _, _| {}).map_err(|e| e.to_string())?;
+    let sim_s = t0.elapsed().as_secs_f64();
+    let t1 = Instant::now();
+    let target = session_map(&sim_dir.join("session_01"), a.every, a.map_voxel)?;
+    let source = session_map(&sim_dir.join("session_02"), a.every, a.map_voxel)?;
+    let map_s = t1.elapsed().as_secs_f64();
+    let t_w_1 = read_single_pose(&sim_dir.join("session_01/gt/t_world_session.txt"))?;
+    let t_w_2 = read_single_pose(&sim_dir.join("session_02/gt/t_world_session.txt"))?;
+    let truth = t_w_1.inverse() * t_w_2;
+    let res = register_maps(&target, &source, &GlobalConfig::default());
+    let err = truth.inverse() * res.t_target_source;
+    let (err_t, err_r) = (err.translation.vector.norm(), err.rotation.angle().to_degrees());
+    if let Some(out) = &a.out {
+        let d = out.join(format!("seed_{seed:02}"));
+        std::fs::create_dir_all(&d).map_err(|e| format!("{}: {e}", d.display()))?;
+        write_bin(&d.join("target.bin"), &target)?;
+        write_bin(&d.join("source.bin"), &source)?;
+        std::fs::write(d.join("truth.txt"), kitti_row(&truth) + "\n").map_err(|e| e.to_string())?;
+    }
+    std::fs::remove_dir_all(&sim_dir).map_err(|e| e.to_string())?;
+    let (reason, success) = match &res.verdict {
+        seam::registration::global::Verdict::Success => (String::new(), true),
+        seam::registration::global::Verdict::Failure { reason } => (reason.clone(), false),
+    };
+    Ok(serde_json::json!({
+        "seed": seed,
+        "sensor": a.sensor.name(),
+        "truth_yaw_deg": truth.rotation.euler_angles().2.to_degrees(),
+        "truth_offset_m": truth.translation.vector.norm(),
+        "success": success,
+        "reason": reason,
+        "err_t_m": err_t,
+        "err_r_deg": err_r,
+        "t_target_source": kitti_row(&res.t_target_source),
+        "correspondences": res.correspondences,
+        "inliers": res.inliers,
+        "inlier_ratio": res.inlier_ratio,
+        "clique": res.clique_size,
+        "hypotheses": res.hypotheses,
+        "structure_fit": res.structure_fit,
+        "matched_structure": res.matched_structure,
+        "overlap_fraction": res.overlap_fraction,
+        "runner_up_ratio": res.runner_up_ratio,
+        "target_points_in": target.len(),
+        "source_points_in": source.len(),
+        "target_voxels": res.target_points,
+        "source_voxels": res.source_points,
+        "elapsed_s": res.elapsed_s,
+        "timings": serde_json::to_value(res.timings).unwrap_or_default(),
+        "sim_s": sim_s,
+        "map_s": map_s,
+    }))
+}
+
+fn main() -> ExitCode {
+    let a = match parse_args() {
+        Ok(a) => a,
+        Err(e) => {
+            eprintln!("global_bench: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    let pool = match rayon::ThreadPoolBuilder::new().num_threads(a.threads).build() {
+        Ok(p) => p,
+        Err(e) => {
+            eprintln!("global_bench: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    let work = match &a.out {
+        Some(out) => out.clone(),
+        None => std::env::temp_dir().join(format!("seam_global_bench_{}", std::process::id())),
+    };
+    let mut failed = false;
+    for &seed in &a.seeds {
+        match pool.install(|| run_seed(&a, seed, &work)) {
+            Ok(v) => println!("{v}"),
+            Err(e) => {
+                eprintln!("seed {seed}: {e}");
+                failed = true;
+            }
+        }
+    }
+    if a.out.is_none() {
+        let _ = std::fs::remove_dir_all(&work);
+    }
+    if failed { ExitCode::FAILURE } else { ExitCode::SUCCESS }
+}
