@@ -115,3 +115,43 @@ CREATE TABLE step_log (
     details_json  TEXT NOT NULL DEFAULT '{}',
     PRIMARY KEY (session_id, step)
 ) WITHOUT ROWID;
+
+-- @migration 2
+-- Coarse alignment of each session's frame into the world (MATH.md §2).
+CREATE TABLE session_alignment (
+    session_id        INTEGER PRIMARY KEY REFERENCES sessions(session_id),
+    method            TEXT NOT NULL,   -- reference | global | initial_guess | unaligned
+    verdict           TEXT NOT NULL CHECK (verdict IN ('success', 'failure')),
+    reason            TEXT NOT NULL DEFAULT '',
+    x_m REAL NOT NULL, y_m REAL NOT NULL, z_m REAL NOT NULL,   -- t_world_session
+    qx  REAL NOT NULL, qy  REAL NOT NULL, qz  REAL NOT NULL, qw REAL NOT NULL,
+    correspondences   INTEGER NOT NULL DEFAULT 0,
+    inliers           INTEGER NOT NULL DEFAULT 0,
+    inlier_ratio      REAL NOT NULL DEFAULT 0,
+    overlap_fraction  REAL NOT NULL DEFAULT 0,
+    elapsed_s         REAL NOT NULL DEFAULT 0
+);
+
+-- Every loop candidate evaluated, accepted or not, with why (MATH.md §3-4):
+-- users ask why two sessions did not merge.
+CREATE TABLE loop_candidates (
+    candidate_id      INTEGER PRIMARY KEY,
+    session_id        INTEGER NOT NULL REFERENCES sessions(session_id), -- the ingest that evaluated it
+    kind              TEXT NOT NULL CHECK (kind IN ('intra', 'inter')),
+    source_keyframe   INTEGER NOT NULL REFERENCES keyframes(keyframe_id),
+    target_keyframe   INTEGER NOT NULL REFERENCES keyframes(keyframe_id),
+    distance_m        REAL NOT NULL,   -- between the two keyframes in the estimate before GICP
+    x_m REAL NOT NULL, y_m REAL NOT NULL, z_m REAL NOT NULL,   -- measured t_target_source
+    qx  REAL NOT NULL, qy  REAL NOT NULL, qz  REAL NOT NULL, qw REAL NOT NULL,
+    converged         INTEGER NOT NULL,
+    iterations        INTEGER NOT NULL,
+    inliers           INTEGER NOT NULL,
+    fitness           REAL NOT NULL,
+    inlier_ratio      REAL NOT NULL,
+    rho_scan          REAL,            -- NULL when infinite (degenerate geometry)
+    rho_corr          REAL,
+    accepted          INTEGER NOT NULL,
+    reason            TEXT NOT NULL
+);
+CREATE INDEX loop_candidates_by_session ON loop_candidates(session_id, accepted);
+CREATE INDEX loop_candidates_by_keyframes ON loop_candidates(source_keyframe, target_keyframe);

@@ -7,8 +7,12 @@
 //!
 //! ```text
 //! cargo run --release --example global_bench -- [--seeds 1-10] [--sensor os1-64] [--keyframes 60]
-//!     [--spacing 1.0] [--every 2] [--map-voxel 0.2] [--threads 2] [--out DIR]
+//!     [--spacing 1.0] [--every 2] [--map-voxel 0.2] [--threads 2] [--out DIR] [--drift 1.0]
+//!     [--config '{"voxel_size_m": 0.7}'] [--maps-only]
 //! ```
+//!
+//! `--config` overrides [`GlobalConfig`] fields (JSON, the names of its TOML
+//! section); `--maps-only` writes the maps without registering them.
 //!
 //! With `--out DIR`, `DIR/seed_NN/{target,source}.bin` hold the maps (f32 x y z,
 //! voxel centroids at `--map-voxel`) and `DIR/seed_NN/truth.txt` the true
@@ -33,6 +37,9 @@ struct Args {
     map_voxel: f64,
     threads: usize,
     out: Option<PathBuf>,
+    drift: f64,
+    config: GlobalConfig,
+    maps_only: bool,
 }
 
 fn parse_seeds(s: &str) -> Result<Vec<u64>, String> {
@@ -57,9 +64,16 @@ fn parse_args() -> Result<Args, String> {
         map_voxel: 0.2,
         threads: 2,
         out: None,
+        drift: 1.0,
+        config: GlobalConfig::default(),
+        maps_only: false,
     };
     let mut it = std::env::args().skip(1);
     while let Some(arg) = it.next() {
+        if arg == "--maps-only" {
+            a.maps_only = true;
+            continue;
+        }
         let val = it.next().ok_or(format!("{arg} needs a value"))?;
         let num = |v: &str| v.parse::<f64>().map_err(|e| format!("{arg}: {e}"));
         match arg.as_str() {
@@ -71,6 +85,8 @@ fn parse_args() -> Result<Args, String> {
             "--map-voxel" => a.map_voxel = num(&val)?,
             "--threads" => a.threads = num(&val)? as usize,
             "--out" => a.out = Some(PathBuf::from(val)),
+            "--drift" => a.drift = num(&val)?,
+            "--config" => a.config = serde_json::from_str(&val).map_err(|e| format!("--config: {e}"))?,
             _ => return Err(format!("unknown option {arg}")),
         }
     }
@@ -101,6 +117,13 @@ fn kitti_row(p: &Pose) -> String {
     seam::geometry::pose_to_kitti_row(p).iter().map(|v| format!("{v:.9}")).collect::<Vec<_>>().join(" ")
 }
 
+/// Translation (m) and rotation (deg) error of `estimate` against `truth`:
+/// `|t_est − t_true|` and the angle of `R_trueᵀ R_est`.
+fn pose_error(truth: &Pose, estimate: &Pose) -> (f64, f64) {
+    let dt = (estimate.translation.vector - truth.translation.vector).norm();
+    (dt, (truth.rotation.inverse() * estimate.rotation).angle().to_degrees())
+}
+
 fn write_bin(path: &Path, pts: &[[f32; 3]]) -> Result<(), String> {
     let bytes: Vec<u8> = pts.iter().flat_map(|p| p.iter().flat_map(|c| c.to_le_bytes())).collect();
     std::fs::write(path, bytes).map_err(|e| format!("{}: {e}", path.display()))
@@ -114,7 +137,7 @@ fn run_seed(a: &Args, seed: u64, work: &Path) -> Result<serde_json::Value, Strin
         seed,
         keyframes_per_session: a.keyframes,
         keyframe_spacing_m: a.spacing,
-        ..SimConfig::default()
+        drift: a.drift,
     };
     let t0 = Instant::now();
     simulate(&sim_dir, &cfg, &|_, _, _| {}).map_err(|e| e.to_string())?;
@@ -126,9 +149,6 @@ fn run_seed(a: &Args, seed: u64, work: &Path) -> Result<serde_json::Value, Strin
     let t_w_1 = read_single_pose(&sim_dir.join("session_01/gt/t_world_session.txt"))?;
     let t_w_2 = read_single_pose(&sim_dir.join("session_02/gt/t_world_session.txt"))?;
     let truth = t_w_1.inverse() * t_w_2;
-    let res = register_maps(&target, &source, &GlobalConfig::default());
-    let err = truth.inverse() * res.t_target_source;
-    let (err_t, err_r) = (err.translation.vector.norm(), err.rotation.angle().to_degrees());
     if let Some(out) = &a.out {
         let d = out.join(format!("seed_{seed:02}"));
         std::fs::create_dir_all(&d).map_err(|e| format!("{}: {e}", d.display()))?;
@@ -137,6 +157,13 @@ fn run_seed(a: &Args, seed: u64, work: &Path) -> Result<serde_json::Value, Strin
         std::fs::write(d.join("truth.txt"), kitti_row(&truth) + "\n").map_err(|e| e.to_string())?;
     }
     std::fs::remove_dir_all(&sim_dir).map_err(|e| e.to_string())?;
+    if a.maps_only {
+        return Ok(
+            serde_json::json!({ "seed": seed, "target_points_in": target.len(), "source_points_in": source.len() }),
+        );
+    }
+    let res = register_maps(&target, &source, &a.config);
+    let (err_t, err_r) = pose_error(&truth, &res.t_target_source);
     let (reason, success) = match &res.verdict {
         seam::registration::global::Verdict::Success => (String::new(), true),
         seam::registration::global::Verdict::Failure { reason } => (reason.clone(), false),

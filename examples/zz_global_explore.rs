@@ -104,6 +104,29 @@ fn main() {
     }
     let cells = seam::registration::global::verify::coverage(&ct, 2.0);
     let sc = seam::registration::global::verify::score(&ct, &cells, 2.0, &cs, &truth, 1.0);
+    {
+        use seam::registration::global::robust::Dof;
+        use seam::registration::global::verify::{RefineParams, refine};
+        let sample = seam::registration::downsample::voxel_downsample(&cs.points, 1.0, true);
+        for (dof, start) in [(Dof::Four, 3.0), (Dof::Six, 3.0), (Dof::Four, 1.0)] {
+            let r = refine(
+                &ct,
+                &sample,
+                &truth,
+                &RefineParams { max_dist_start_m: start, max_dist_end_m: 0.5, iterations: 30, dof },
+            );
+            let e = truth.inverse() * r;
+            let sc2 = seam::registration::global::verify::score(&ct, &cells, 2.0, &cs, &r, 1.0);
+            eprintln!(
+                "ICP from truth {dof:?} start {start}: err {:.2} m {:.2} deg  (t err {:.2?}) fit {:.3} matched {}",
+                e.translation.vector.norm(),
+                e.rotation.angle().to_degrees(),
+                (r.translation.vector - truth.translation.vector).as_slice(),
+                sc2.structure_fit(),
+                sc2.matched
+            );
+        }
+    }
     eprintln!("truth score {:?} fit {:.3} overlap {:.3}", sc, sc.structure_fit(), sc.overlap_fraction());
     // extent of both maps
     let ext = |c: &MapCloud| {

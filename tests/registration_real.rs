@@ -174,13 +174,17 @@ fn a_start_far_outside_the_basin_is_not_reported_as_accurate() {
     let res = align(&target, &source, &far, &cfg);
     let (te, re) = errors(&res.t_target_source, &t_target_source);
     eprintln!(
-        "far start: {:.2} m, {:.2}°, fitness {:.3} m², inliers {:.0}%",
+        "far start: {:.2} m, {:.2}°, converged {}, fitness {:.3} m², inliers {:.0}%",
         te,
         re,
+        res.converged,
         res.fitness,
         res.inlier_ratio * 100.0
     );
     assert!(te > MAX_TRANS_ERR_M || re > MAX_ROT_ERR_DEG);
+    // `converged` only says the steps became small; the wrong minimum shows
+    // in the diagnostics (87% inliers at the right pose).
+    assert!(res.inlier_ratio < 0.5, "{}", res.inlier_ratio);
 }
 
 #[test]

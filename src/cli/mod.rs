@@ -14,6 +14,7 @@ mod exit;
 mod ingest;
 mod init;
 mod output;
+mod poses;
 mod sessions;
 mod simulate;
 
@@ -40,8 +41,15 @@ pub struct Cli {
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum Format {
+    /// Aligned columns for people.
     Table,
     Json,
+    /// Comma-separated with a header line.
+    Csv,
+    /// KITTI pose rows (`seam poses` only).
+    Kitti,
+    /// TUM `t x y z qx qy qz qw` rows (`seam poses` only).
+    Tum,
 }
 
 #[derive(Debug, Subcommand)]
@@ -54,6 +62,8 @@ pub enum Command {
     Sessions(sessions::StoreArg),
     /// Show what a store holds.
     Info(sessions::StoreArg),
+    /// Print the optimised world pose of every keyframe.
+    Poses(poses::PosesArgs),
     /// Verify the store's integrity; --repair removes orphan files.
     Check(check::CheckArgs),
     /// Write a simulated multi-session construction site with ground truth.
@@ -105,6 +115,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Sessions(a) => sessions::run_sessions(&ctx, a),
         Command::Info(a) => sessions::run_info(&ctx, a),
         Command::Check(a) => check::run(&ctx, a),
+        Command::Poses(a) => poses::run(&ctx, a),
         Command::Simulate(a) => simulate::run(&ctx, a),
         Command::Demo(a) => demo::run(&ctx, a),
     }

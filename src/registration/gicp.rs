@@ -83,7 +83,7 @@ impl Default for GicpConfig {
 
 /// Levenberg-Marquardt constants (small_gicp's): λ starts tiny, so a good
 /// step is a Gauss-Newton step; a rejected one is retried with λ × 10.
-const LM_INIT_LAMBDA: f64 = 1e-4;
+const LM_INIT_LAMBDA: f64 = 1e-3;
 const LM_FACTOR: f64 = 10.0;
 const LM_MAX_INNER: usize = 10;
 /// Fewer correspondences than this cannot constrain 6 degrees of freedom.

@@ -21,11 +21,13 @@
 //!
 //! Not here: what the rows mean (the pipeline decides that), printing (cli).
 
+mod alignment;
 mod check;
 mod files;
 mod rows;
 mod schema;
 
+pub use alignment::*;
 pub use check::{CheckReport, FileProblem};
 pub use files::{FileRecord, ScanWriter, insert_file, read_scan_row_group};
 pub use rows::*;

@@ -8,7 +8,7 @@ use std::path::Path;
 pub const SCHEMA_SQL: &str = include_str!("../../schema.sql");
 
 /// The newest migration in `schema.sql`.
-pub const SCHEMA_VERSION: i64 = 1;
+pub const SCHEMA_VERSION: i64 = 2;
 
 /// The migrations of `schema.sql` as `(version, sql)`, in file order.
 pub fn migrations() -> Vec<(i64, &'static str)> {
@@ -91,6 +91,30 @@ mod tests {
         assert_eq!(user_version(&conn, root).unwrap(), SCHEMA_VERSION);
         migrate(&mut conn, root).unwrap();
         check_version(&conn, root).unwrap();
+    }
+
+    /// A store written by the first release opens, migrates, and keeps its rows.
+    #[test]
+    fn version_1_store_migrates_forward_with_its_data() {
+        let mut conn = Connection::open_in_memory().unwrap();
+        let root = Path::new("mem");
+        let (v1, body) = migrations()[0];
+        conn.execute_batch(body).unwrap();
+        conn.pragma_update(None, "user_version", v1).unwrap();
+        conn.execute("INSERT INTO meta VALUES ('site_name', 'old')", []).unwrap();
+        conn.execute(
+            "INSERT INTO sessions(name, content_hash, source_dir, layout, keyframe_count, point_count, status, created_at)
+             VALUES ('s1', 'h', '/d', 'kitti', 3, 30, 'complete', 't')",
+            [],
+        )
+        .unwrap();
+        check_version(&conn, root).unwrap();
+        migrate(&mut conn, root).unwrap();
+        assert_eq!(user_version(&conn, root).unwrap(), SCHEMA_VERSION);
+        let n: i64 = conn.query_row("SELECT count(*) FROM sessions WHERE name = 's1'", [], |r| r.get(0)).unwrap();
+        assert_eq!(n, 1);
+        let site: String = conn.query_row("SELECT value FROM meta WHERE key = 'site_name'", [], |r| r.get(0)).unwrap();
+        assert_eq!(site, "old");
     }
 
     #[test]

@@ -66,6 +66,7 @@
 //! - `verify`: point-to-plane ICP refinement, structure score.
 //! - `register`: [`register_maps`], the steps above as one page, and the verdict.
 
+pub mod bev;
 pub mod clique;
 pub mod cloud;
 pub mod fpfh;
@@ -106,8 +107,16 @@ pub struct GlobalConfig {
     /// Branch-and-bound nodes per max-clique search before settling for the
     /// best clique found (the result then says so).
     pub clique_node_budget: usize,
+    /// Hypotheses from the exhaustive bird's-eye-view search (gravity only; 0: off).
+    pub bev_hypotheses: usize,
+    /// Cell of that search, m.
+    pub bev_cell_m: f64,
+    /// Yaw step of that search, deg.
+    pub bev_yaw_step_deg: f64,
     /// Point-to-plane ICP iterations per hypothesis.
     pub refine_iterations: usize,
+    /// ICP's correspondence distance at the first iteration, m (it shrinks to one voxel).
+    pub refine_start_m: f64,
     // --- verdict ---
     /// Fewest feature correspondences that agree with the final transform
     /// (within `noise_bound_m`).
@@ -141,7 +150,11 @@ impl Default for GlobalConfig {
             max_tilt_deg: 2.0,
             max_hypotheses: 4,
             clique_node_budget: 200_000,
+            bev_hypotheses: 3,
+            bev_cell_m: 2.0,
+            bev_yaw_step_deg: 1.5,
             refine_iterations: 30,
+            refine_start_m: 3.0,
             min_inliers: 12,
             match_distance_m: 1.0,
             coverage_cell_m: 2.0,

@@ -4,11 +4,12 @@ use std::time::Instant;
 
 use nalgebra::{Point3, Vector3};
 
+use super::bev::{BevParams, bev_hypotheses};
 use super::clique::consistency_graph;
 use super::cloud::MapCloud;
 use super::fpfh::compute_fpfh;
 use super::matching::{Correspondence, mutual_matches};
-use super::robust::{Dof, Hypothesis, RobustParams, hypotheses};
+use super::robust::{Dof, RobustParams, hypotheses};
 use super::verify::{RefineParams, Score, coverage, pose_distance, refine, score, v3};
 use super::{GlobalConfig, GlobalResult, GlobalTimings, Verdict};
 use crate::geometry::Pose;
@@ -20,6 +21,7 @@ const MIN_DESCRIPTORS: usize = 20;
 /// A hypothesis after refinement, with its score.
 struct Checked {
     pose: Pose,
+    /// Size of the clique it came from (0 for the BEV search).
     clique: usize,
     score: Score,
 }
@@ -69,7 +71,8 @@ pub fn register_maps(target: &[[f32; 3]], source: &[[f32; 3]], cfg: &GlobalConfi
     result.correspondences = corr.len();
     tick(&mut timings.matching_s);
 
-    // 4. Consistency graph, max clique + GNC-TLS, runner-ups.
+    // 4. Consistency graph, max clique + GNC-TLS, runner-ups; with gravity,
+    //    also the exhaustive yaw × offset search of the structure layout.
     let tilt = cfg.gravity_aligned.then(|| cfg.max_tilt_deg.to_radians());
     let graph = consistency_graph(&cs, &ct, cfg.noise_bound_m, tilt);
     let params = RobustParams {
@@ -79,7 +82,18 @@ pub fn register_maps(target: &[[f32; 3]], source: &[[f32; 3]], cfg: &GlobalConfi
         min_clique: 3,
         node_budget: cfg.clique_node_budget,
     };
-    let hyps = hypotheses(&cs, &ct, &graph, &params);
+    let mut hyps: Vec<(Pose, usize)> =
+        hypotheses(&cs, &ct, &graph, &params).into_iter().map(|h| (h.t_target_source, h.clique.len())).collect();
+    if cfg.gravity_aligned && cfg.bev_hypotheses > 0 {
+        let bev = BevParams {
+            cell_m: cfg.bev_cell_m,
+            yaw_step_deg: cfg.bev_yaw_step_deg,
+            max_hypotheses: cfg.bev_hypotheses,
+            suppress_yaw_deg: 10.0,
+            suppress_m: 5.0,
+        };
+        hyps.extend(bev_hypotheses(&tgt, &src, &bev).into_iter().map(|pose| (pose, 0)));
+    }
     result.hypotheses = hyps.len();
     tick(&mut timings.solver_s);
     if hyps.is_empty() {
@@ -98,20 +112,38 @@ pub fn register_maps(target: &[[f32; 3]], source: &[[f32; 3]], cfg: &GlobalConfi
     let sample = voxel_downsample(&src.points, 2.0 * cfg.voxel_size_m, true);
     let cells = coverage(&tgt, cfg.coverage_cell_m);
     let refine_params = RefineParams {
-        max_dist_start_m: (3.0 * cfg.noise_bound_m).max(2.0 * cfg.voxel_size_m),
+        max_dist_start_m: cfg.refine_start_m,
         max_dist_end_m: cfg.voxel_size_m,
         iterations: cfg.refine_iterations,
         dof,
     };
     let checked: Vec<Checked> = hyps
         .iter()
-        .map(|h: &Hypothesis| {
-            let pose = refine(&tgt, &sample, &h.t_target_source, &refine_params);
+        .map(|&(init, clique)| {
+            let pose = refine(&tgt, &sample, &init, &refine_params);
             let score = score(&tgt, &cells, cfg.coverage_cell_m, &src, &pose, cfg.match_distance_m);
-            Checked { pose, clique: h.clique.len(), score }
+            Checked { pose, clique, score }
         })
         .collect();
     tick(&mut timings.verify_s);
+    if std::env::var("SEAM_GLOBAL_DEBUG").is_ok() {
+        for (h, c) in hyps.iter().zip(&checked) {
+            let e = c.pose.rotation.euler_angles();
+            let e0 = h.0.rotation.euler_angles();
+            eprintln!(
+                "hyp clique {} init yaw {:.1} t {:.2?} -> yaw {:.1} rp {:.2} {:.2} t {:.2?} score {:?} fit {:.3}",
+                c.clique,
+                e0.2.to_degrees(),
+                h.0.translation.vector.as_slice(),
+                e.2.to_degrees(),
+                e.0.to_degrees(),
+                e.1.to_degrees(),
+                c.pose.translation.vector.as_slice(),
+                c.score,
+                c.score.structure_fit()
+            );
+        }
+    }
 
     // 6. The winner, its evidence, and the verdict.
     let best = checked

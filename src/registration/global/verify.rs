@@ -124,6 +124,9 @@ pub struct Score {
     pub structure: usize,
     pub covered: usize,
     pub matched: usize,
+    /// Covered structure points within half the match distance of a target
+    /// point whose normal agrees with theirs (|cos| > 0.9).
+    pub tight: usize,
 }
 
 impl Score {
@@ -155,15 +158,21 @@ pub fn score(
         .zip(source.normals.par_iter())
         .map(|(p, n)| {
             let q: [f64; 3] = (t * Point3::from(*p)).into();
-            let matched = target.tree.nearest(&q).is_some_and(|(_, d2)| d2 <= md2);
+            let nn = target.tree.nearest(&q);
+            let matched = nn.is_some_and(|(_, d2)| d2 <= md2);
             let structure = n.is_some_and(|n| (r * n).z.abs() < STRUCTURE_MAX_ABS_NZ);
             let covered = structure && covered_cells.contains(&cell_of(&q, cell_m));
+            let tight = covered
+                && nn.is_some_and(|(j, d2)| {
+                    d2 <= md2 / 4.0 && target.normals[j].zip(*n).is_some_and(|(a, b)| a.dot(&(r * b)).abs() > 0.9)
+                });
             Score {
                 matched_all: matched as usize,
                 source_points: 1,
                 structure: structure as usize,
                 covered: covered as usize,
                 matched: (covered && matched) as usize,
+                tight: tight as usize,
             }
         })
         .reduce(Score::default, |a, b| Score {
@@ -172,6 +181,7 @@ pub fn score(
             structure: a.structure + b.structure,
             covered: a.covered + b.covered,
             matched: a.matched + b.matched,
+            tight: a.tight + b.tight,
         })
 }
 
