@@ -2,21 +2,9 @@
 //! loop candidate with its verdict.
 
 use super::StoreError;
-use super::rows::{KeyframeId, SessionId, pose_cols, pose_from_cols};
+use super::rows::{KeyframeId, SessionId, e, pose_at, pose_cols};
 use crate::geometry::Pose;
-use rusqlite::{Connection, OptionalExtension, Row, params};
-
-fn e(conn: &Connection) -> impl Fn(rusqlite::Error) -> StoreError + '_ {
-    move |source| StoreError::Sql { path: conn.path().unwrap_or("seam.db").into(), source }
-}
-
-fn pose_at(r: &Row<'_>, first: usize) -> rusqlite::Result<Pose> {
-    let mut c = [0.0; 7];
-    for (k, v) in c.iter_mut().enumerate() {
-        *v = r.get(first + k)?;
-    }
-    Ok(pose_from_cols(c))
-}
+use rusqlite::{Connection, OptionalExtension, params};
 
 /// How a session's frame was placed in the world.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]

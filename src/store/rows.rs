@@ -8,7 +8,7 @@ use nalgebra::{Quaternion, Translation3, UnitQuaternion};
 use rusqlite::{Connection, OptionalExtension, Row, params};
 
 /// Turns a rusqlite error into a store error naming the database.
-fn e(conn: &Connection) -> impl Fn(rusqlite::Error) -> StoreError + '_ {
+pub(super) fn e(conn: &Connection) -> impl Fn(rusqlite::Error) -> StoreError + '_ {
     move |source| StoreError::Sql { path: conn.path().unwrap_or("seam.db").into(), source }
 }
 
@@ -169,7 +169,7 @@ pub fn pose_from_cols(c: [f64; 7]) -> Pose {
     )
 }
 
-fn pose_at(r: &Row<'_>, first: usize) -> rusqlite::Result<Pose> {
+pub(super) fn pose_at(r: &Row<'_>, first: usize) -> rusqlite::Result<Pose> {
     let mut c = [0.0; 7];
     for (k, v) in c.iter_mut().enumerate() {
         *v = r.get(first + k)?;
