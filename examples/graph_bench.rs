@@ -19,6 +19,7 @@ fn truth(s: usize, k: usize) -> Pose {
     )
 }
 
+#[allow(clippy::needless_range_loop)] // (session, keyframe) indices are the point here
 fn main() {
     let (sessions, per) = (5, 300);
     let mut g = PoseGraph::default();
@@ -31,7 +32,7 @@ fn main() {
         let mut first = Pose::identity();
         for k in 0..per {
             if k > 0 {
-                dr = dr * (truth(s, k - 1).inverse() * truth(s, k) * bias);
+                dr *= truth(s, k - 1).inverse() * truth(s, k) * bias;
             }
             if k % 20 == 0 {
                 anchor = g.add_anchor(dr, s == 0 && k == 0);
