@@ -8,8 +8,12 @@
 //! ```text
 //! cargo run --release --example global_bench -- [--seeds 1-10] [--sensor os1-64] [--keyframes 60]
 //!     [--spacing 1.0] [--every 2] [--map-voxel 0.2] [--threads 2] [--out DIR] [--drift 1.0]
-//!     [--config '{"voxel_size_m": 0.7}'] [--maps-only]
+//!     [--config '{"voxel_size_m": 0.7}'] [--maps-only] [--same-session]
 //! ```
+//!
+//! `--same-session` pairs two halves of session 1 instead (even keyframes as
+//! the target, odd ones moved by a random yaw and offset as the source): the
+//! same viewpoints, so local descriptors repeat, unlike between sessions.
 //!
 //! `--config` overrides [`GlobalConfig`] fields (JSON, the names of its TOML
 //! section); `--maps-only` writes the maps without registering them.
@@ -40,6 +44,7 @@ struct Args {
     drift: f64,
     config: GlobalConfig,
     maps_only: bool,
+    same_session: bool,
 }
 
 fn parse_seeds(s: &str) -> Result<Vec<u64>, String> {
@@ -67,11 +72,16 @@ fn parse_args() -> Result<Args, String> {
         drift: 1.0,
         config: GlobalConfig::default(),
         maps_only: false,
+        same_session: false,
     };
     let mut it = std::env::args().skip(1);
     while let Some(arg) = it.next() {
         if arg == "--maps-only" {
             a.maps_only = true;
+            continue;
+        }
+        if arg == "--same-session" {
+            a.same_session = true;
             continue;
         }
         let val = it.next().ok_or(format!("{arg} needs a value"))?;
@@ -94,10 +104,10 @@ fn parse_args() -> Result<Args, String> {
 }
 
 /// A session's keyframes merged by odometry (every `every`-th), voxel centroids.
-fn session_map(dir: &Path, every: usize, voxel: f64) -> Result<Vec<[f32; 3]>, String> {
+fn session_map(dir: &Path, first: usize, every: usize, voxel: f64) -> Result<Vec<[f32; 3]>, String> {
     let src = seam::io::detect_session(dir).map_err(|e| e.to_string())?;
     let mut pts: Vec<[f64; 3]> = Vec::new();
-    for kf in src.keyframes.iter().step_by(every) {
+    for kf in src.keyframes.iter().skip(first).step_by(every) {
         let scan = seam::io::read_session_scan(&src, kf.index).map_err(|e| e.to_string())?;
         let t = kf.t_session_sensor;
         pts.extend(scan.points.iter().map(|p| {
@@ -106,6 +116,18 @@ fn session_map(dir: &Path, every: usize, voxel: f64) -> Result<Vec<[f32; 3]>, St
         }));
     }
     Ok(voxel_downsample(&pts, voxel, true).iter().map(|p| [p[0] as f32, p[1] as f32, p[2] as f32]).collect())
+}
+
+/// Yaw in ±180°, up to 30 m horizontal and 2 m vertical offset, from the seed.
+fn random_motion(seed: u64) -> Pose {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed ^ 0x5eed);
+    let t = nalgebra::Vector3::new(
+        rng.random_range(-21.0..21.0),
+        rng.random_range(-21.0..21.0),
+        rng.random_range(-2.0..2.0),
+    );
+    Pose::new(t, nalgebra::Vector3::new(0.0, 0.0, rng.random_range(-std::f64::consts::PI..std::f64::consts::PI)))
 }
 
 fn read_single_pose(path: &Path) -> Result<Pose, String> {
@@ -143,12 +165,24 @@ fn run_seed(a: &Args, seed: u64, work: &Path) -> Result<serde_json::Value, Strin
     simulate(&sim_dir, &cfg, &|_, _, _| {}).map_err(|e| e.to_string())?;
     let sim_s = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
-    let target = session_map(&sim_dir.join("session_01"), a.every, a.map_voxel)?;
-    let source = session_map(&sim_dir.join("session_02"), a.every, a.map_voxel)?;
+    let target = session_map(&sim_dir.join("session_01"), 0, a.every, a.map_voxel)?;
+    let source = if a.same_session {
+        // The other keyframes of session 1, moved by a random yaw and offset.
+        let odd = session_map(&sim_dir.join("session_01"), a.every.div_ceil(2), a.every, a.map_voxel)?;
+        let motion = random_motion(seed);
+        odd.iter()
+            .map(|p| {
+                let q = motion.inverse() * nalgebra::Point3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+                [q.x as f32, q.y as f32, q.z as f32]
+            })
+            .collect()
+    } else {
+        session_map(&sim_dir.join("session_02"), 0, a.every, a.map_voxel)?
+    };
     let map_s = t1.elapsed().as_secs_f64();
     let t_w_1 = read_single_pose(&sim_dir.join("session_01/gt/t_world_session.txt"))?;
     let t_w_2 = read_single_pose(&sim_dir.join("session_02/gt/t_world_session.txt"))?;
-    let truth = t_w_1.inverse() * t_w_2;
+    let truth = if a.same_session { random_motion(seed) } else { t_w_1.inverse() * t_w_2 };
     if let Some(out) = &a.out {
         let d = out.join(format!("seed_{seed:02}"));
         std::fs::create_dir_all(&d).map_err(|e| format!("{}: {e}", d.display()))?;
@@ -179,12 +213,12 @@ fn run_seed(a: &Args, seed: u64, work: &Path) -> Result<serde_json::Value, Strin
         "err_r_deg": err_r,
         "t_target_source": kitti_row(&res.t_target_source),
         "correspondences": res.correspondences,
+        "feature_inliers": res.feature_inliers,
         "inliers": res.inliers,
         "inlier_ratio": res.inlier_ratio,
         "clique": res.clique_size,
         "hypotheses": res.hypotheses,
-        "structure_fit": res.structure_fit,
-        "matched_structure": res.matched_structure,
+        "refined": res.refined,
         "overlap_fraction": res.overlap_fraction,
         "runner_up_ratio": res.runner_up_ratio,
         "target_points_in": target.len(),

@@ -19,13 +19,36 @@
 use nalgebra::Vector3;
 use rayon::prelude::*;
 
-/// An undirected graph as sorted adjacency lists.
+/// An undirected graph as sorted adjacency lists, plus an adjacency bit
+/// matrix for constant-time edge tests when it is small enough.
 #[derive(Debug, Clone)]
 pub struct Graph {
     pub adj: Vec<Vec<u32>>,
+    /// Row-major `n × n` bits (`words` u64 per row), for n ≤ [`DENSE_MAX`].
+    dense: Option<(usize, Vec<u64>)>,
 }
 
+/// Largest vertex count with a dense adjacency matrix (20 000² bits = 50 MB).
+pub const DENSE_MAX: usize = 20_000;
+
 impl Graph {
+    /// A graph from adjacency lists (sorted here).
+    pub fn new(mut adj: Vec<Vec<u32>>) -> Graph {
+        adj.iter_mut().for_each(|a| a.sort_unstable());
+        let n = adj.len();
+        let dense = (n <= DENSE_MAX).then(|| {
+            let words = n.div_ceil(64);
+            let mut bits = vec![0u64; n * words];
+            for (a, row) in adj.iter().enumerate() {
+                for &b in row {
+                    bits[a * words + b as usize / 64] |= 1 << (b % 64);
+                }
+            }
+            (words, bits)
+        });
+        Graph { adj, dense }
+    }
+
     pub fn len(&self) -> usize {
         self.adj.len()
     }
@@ -38,8 +61,12 @@ impl Graph {
         self.adj.iter().map(Vec::len).sum::<usize>() / 2
     }
 
+    #[inline]
     pub fn has_edge(&self, a: u32, b: u32) -> bool {
-        self.adj[a as usize].binary_search(&b).is_ok()
+        match &self.dense {
+            Some((words, bits)) => bits[a as usize * words + b as usize / 64] >> (b % 64) & 1 == 1,
+            None => self.adj[a as usize].binary_search(&b).is_ok(),
+        }
     }
 }
 
@@ -74,7 +101,7 @@ pub fn consistency_graph(
                 .collect()
         })
         .collect();
-    Graph { adj }
+    Graph::new(adj)
 }
 
 /// A maximum clique of the subgraph of `active` vertices, and whether it is
@@ -309,8 +336,7 @@ mod tests {
                 }
             }
         }
-        adj.iter_mut().for_each(|a| a.sort_unstable());
-        Graph { adj }
+        Graph::new(adj)
     }
 
     /// Size of a maximum clique by trying every subset (n ≤ 16).
@@ -344,16 +370,17 @@ mod tests {
 
     #[test]
     fn finds_a_planted_clique_and_respects_the_active_set() {
-        let mut g = random_graph(600, 0.02, 7);
+        let g = random_graph(600, 0.02, 7);
         let planted: Vec<u32> = (0..600).step_by(23).collect(); // 27 vertices
+        let mut adj = g.adj.clone();
         for &a in &planted {
             for &b in &planted {
                 if a != b && !g.has_edge(a, b) {
-                    g.adj[a as usize].push(b);
+                    adj[a as usize].push(b);
                 }
             }
         }
-        g.adj.iter_mut().for_each(|a| a.sort_unstable());
+        let g = Graph::new(adj);
         let mut active = vec![true; g.len()];
         let (c, exact) = max_clique(&g, &active, 1_000_000);
         assert!(exact);
@@ -381,8 +408,7 @@ mod tests {
         edge(4, 5);
         edge(5, 6);
         edge(6, 7);
-        adj.iter_mut().for_each(|a| a.sort_unstable());
-        let (order, core) = degeneracy_order(&Graph { adj }, &[true; 8]);
+        let (order, core) = degeneracy_order(&Graph::new(adj), &[true; 8]);
         assert_eq!(order.len(), 8);
         assert_eq!(core, vec![4, 4, 4, 4, 4, 1, 1, 1]);
     }

@@ -36,8 +36,16 @@ pub type Descriptor = [f32; DIM];
 /// radius get no descriptor (their histograms would be mostly noise).
 pub const MIN_FEATURE_NEIGHBORS: usize = 8;
 
-/// Descriptors of the points of `cloud` that have one: `(point index, FPFH)`,
-/// in ascending point order.
+/// Points whose neighbours' normals are this parallel to their own
+/// (`|n_p · n_q|` in the last bin, above 0.91) more often than this are on
+/// a flat patch: ground, a wall's middle. Their descriptors all look alike and
+/// only ever match at random, so they get none (in a map, most points; this
+/// halves the matching time and removes mostly hopeless matches).
+pub const MAX_FLAT_FRACTION: f32 = 0.9;
+
+/// Descriptors of the points of `cloud` that have one (a normal, enough
+/// neighbours, not on a flat patch): `(point index, FPFH)`, in ascending
+/// point order.
 pub fn compute_fpfh(cloud: &MapCloud, feature_radius_m: f64) -> Vec<(u32, Descriptor)> {
     // 1. SPFH of every point with a normal and enough neighbours.
     let spfh: Vec<Option<Descriptor>> = (0..cloud.len())
@@ -53,6 +61,9 @@ pub fn compute_fpfh(cloud: &MapCloud, feature_radius_m: f64) -> Vec<(u32, Descri
         .into_par_iter()
         .map_init(Vec::new, |nbrs, i| {
             let own = spfh[i].as_ref()?;
+            if own[BINS - 1] > 100.0 * MAX_FLAT_FRACTION {
+                return None;
+            }
             cloud.tree.within(&cloud.points[i], feature_radius_m, nbrs);
             let mut acc = [0.0f64; DIM];
             for &(j, d2) in nbrs.iter() {

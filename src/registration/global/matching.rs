@@ -31,7 +31,7 @@ use super::fpfh::{DIM, Descriptor};
 /// Principal components the kd-tree searches in.
 pub const SEARCH_DIM: usize = 10;
 /// Candidates fetched in the reduced space and re-ranked in the full one.
-pub const CANDIDATES: usize = 24;
+pub const CANDIDATES: usize = 10;
 
 /// One feature correspondence: indices into the source and target point
 /// sets, and its Lowe ratio (smaller is more distinctive).

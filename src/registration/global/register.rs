@@ -8,9 +8,9 @@ use super::bev::{BevParams, bev_hypotheses};
 use super::clique::consistency_graph;
 use super::cloud::MapCloud;
 use super::fpfh::compute_fpfh;
-use super::matching::{Correspondence, mutual_matches};
+use super::matching::mutual_matches;
 use super::robust::{Dof, RobustParams, hypotheses};
-use super::verify::{RefineParams, Score, coverage, pose_distance, refine, score, v3};
+use super::verify::{RefineParams, Score, Verifier, pose_distance, refine, v3};
 use super::{GlobalConfig, GlobalResult, GlobalTimings, Verdict};
 use crate::geometry::Pose;
 use crate::registration::downsample::voxel_downsample;
@@ -18,7 +18,7 @@ use crate::registration::downsample::voxel_downsample;
 /// Fewer descriptors than this on either map cannot be matched meaningfully.
 const MIN_DESCRIPTORS: usize = 20;
 
-/// A hypothesis after refinement, with its score.
+/// A hypothesis with its score.
 struct Checked {
     pose: Pose,
     /// Size of the clique it came from (0 for the BEV search).
@@ -37,6 +37,15 @@ pub fn register_maps(target: &[[f32; 3]], source: &[[f32; 3]], cfg: &GlobalConfi
         lap = Instant::now();
     };
     let dof = if cfg.gravity_aligned { Dof::Four } else { Dof::Six };
+    if let Err(e) = cfg.validate() {
+        let empty = MapCloud::new(&[] as &[[f32; 3]], 1.0, 1.0);
+        return fail(
+            empty_result(&empty, &empty),
+            start,
+            timings,
+            format!("invalid global registration settings: {e}"),
+        );
+    }
 
     // 1. Voxel centroids and normals of both maps (MATH.md §2: 0.5-1.0 m).
     let (tgt, src) = rayon::join(
@@ -108,77 +117,65 @@ pub fn register_maps(target: &[[f32; 3]], source: &[[f32; 3]], cfg: &GlobalConfi
         );
     }
 
-    // 5. Refine every hypothesis on the maps and score it.
+    // 5. Score every hypothesis as it is, refine the best distinct ones by
+    //    ICP on the maps, and score them again.
+    let verifier = Verifier::new(&tgt, &src, cfg.coverage_cell_m, cfg.match_distance_m);
+    let mut initial: Vec<Checked> =
+        hyps.iter().map(|&(pose, clique)| Checked { pose, clique, score: verifier.score(&pose) }).collect();
+    initial.sort_by(|a, b| b.score.evidence().total_cmp(&a.score.evidence()));
     let sample = voxel_downsample(&src.points, 2.0 * cfg.voxel_size_m, true);
-    let cells = coverage(&tgt, cfg.coverage_cell_m);
     let refine_params = RefineParams {
         max_dist_start_m: cfg.refine_start_m,
         max_dist_end_m: cfg.voxel_size_m,
         iterations: cfg.refine_iterations,
         dof,
     };
-    let checked: Vec<Checked> = hyps
-        .iter()
-        .map(|&(init, clique)| {
-            let pose = refine(&tgt, &sample, &init, &refine_params);
-            let score = score(&tgt, &cells, cfg.coverage_cell_m, &src, &pose, cfg.match_distance_m);
-            Checked { pose, clique, score }
+    let mut checked: Vec<Checked> = distinct(initial, cfg)
+        .into_iter()
+        .take(cfg.refine_top.max(1))
+        .map(|h| {
+            let pose = refine(&tgt, &sample, &h.pose, &refine_params);
+            Checked { pose, clique: h.clique, score: verifier.score(&pose) }
         })
         .collect();
+    checked.sort_by(|a, b| b.score.evidence().total_cmp(&a.score.evidence()));
+    let checked = distinct(checked, cfg);
+    result.refined = checked.len();
     tick(&mut timings.verify_s);
-    if std::env::var("SEAM_GLOBAL_DEBUG").is_ok() {
-        for (h, c) in hyps.iter().zip(&checked) {
-            let e = c.pose.rotation.euler_angles();
-            let e0 = h.0.rotation.euler_angles();
-            eprintln!(
-                "hyp clique {} init yaw {:.1} t {:.2?} -> yaw {:.1} rp {:.2} {:.2} t {:.2?} score {:?} fit {:.3}",
-                c.clique,
-                e0.2.to_degrees(),
-                h.0.translation.vector.as_slice(),
-                e.2.to_degrees(),
-                e.0.to_degrees(),
-                e.1.to_degrees(),
-                c.pose.translation.vector.as_slice(),
-                c.score,
-                c.score.structure_fit()
-            );
-        }
-    }
 
-    // 6. The winner, its evidence, and the verdict.
-    let best = checked
-        .iter()
-        .enumerate()
-        .max_by(|(ia, a), (ib, b)| a.score.matched.cmp(&b.score.matched).then(a.clique.cmp(&b.clique)).then(ib.cmp(ia)))
-        .map(|(i, _)| i)
-        .unwrap_or(0);
-    let win = &checked[best];
-    let runner_up = checked
-        .iter()
-        .filter(|c| {
-            let (dt, dr) = pose_distance(&c.pose, &win.pose);
-            dt > cfg.same_answer_m || dr > cfg.same_answer_deg.to_radians()
-        })
-        .map(|c| c.score.matched)
-        .max()
-        .unwrap_or(0);
+    // 6. The winner, its evidence against the runner-up, and the verdict.
+    let win = &checked[0];
+    let best = win.score.evidence();
+    let runner_up = checked.get(1).map_or(0.0, |c| c.score.evidence());
     result.t_target_source = win.pose;
     result.clique_size = win.clique;
-    result.inliers = count_inliers(&corr, &cs, &ct, &win.pose, cfg.noise_bound_m);
-    result.inlier_ratio = result.inliers as f64 / corr.len().max(1) as f64;
+    result.feature_inliers = count_inliers(&cs, &ct, &win.pose, cfg.noise_bound_m);
+    result.inliers = win.score.matched();
+    result.inlier_ratio = win.score.fit();
     result.overlap_fraction = win.score.overlap_fraction();
-    result.structure_fit = win.score.structure_fit();
-    result.matched_structure = win.score.matched;
-    result.runner_up_ratio = if win.score.matched > 0 { runner_up as f64 / win.score.matched as f64 } else { 0.0 };
+    result.runner_up_ratio = if best > 0.0 { runner_up / best } else { 0.0 };
+    result.elapsed_s = start.elapsed().as_secs_f64();
+    result.timings = timings;
     match verdict(&result, cfg) {
         Some(reason) => fail(result, start, timings, reason),
-        None => {
-            result.verdict = Verdict::Success;
-            result.elapsed_s = start.elapsed().as_secs_f64();
-            result.timings = timings;
-            result
+        None => GlobalResult { verdict: Verdict::Success, ..result },
+    }
+}
+
+/// `sorted` (best first) without the hypotheses that are the same answer as
+/// a better one.
+fn distinct(sorted: Vec<Checked>, cfg: &GlobalConfig) -> Vec<Checked> {
+    let mut out: Vec<Checked> = Vec::new();
+    for c in sorted {
+        let same = out.iter().any(|k| {
+            let (dt, dr) = pose_distance(&k.pose, &c.pose);
+            dt <= cfg.same_answer_m && dr <= cfg.same_answer_deg.to_radians()
+        });
+        if !same {
+            out.push(c);
         }
     }
+    out
 }
 
 /// `Some(reason)` when the evidence does not support the estimate.
@@ -186,28 +183,22 @@ fn verdict(r: &GlobalResult, cfg: &GlobalConfig) -> Option<String> {
     let hint = "the maps may not overlap, or overlap too little";
     if r.inliers < cfg.min_inliers {
         return Some(format!(
-            "only {} of {} feature matches agree with the best estimate (need {}): {hint}",
-            r.inliers, r.correspondences, cfg.min_inliers
+            "after alignment only {} structure voxels of the new map lie on the old map (need {}): {hint}",
+            r.inliers, cfg.min_inliers
         ));
     }
-    if r.structure_fit < cfg.min_structure_fit {
+    if r.inlier_ratio < cfg.min_inlier_ratio {
         return Some(format!(
-            "after alignment only {:.0} % of the new map's structure lies on the old map where both surveyed \
+            "after alignment only {:.0} % of the structure lies on the other map where both surveyed \
              (need {:.0} %): {hint}, or the site changed a lot",
-            100.0 * r.structure_fit,
-            100.0 * cfg.min_structure_fit
-        ));
-    }
-    if r.matched_structure < cfg.min_matched_structure {
-        return Some(format!(
-            "only {} structure voxels of the new map match the old map (need {}): {hint}",
-            r.matched_structure, cfg.min_matched_structure
+            100.0 * r.inlier_ratio,
+            100.0 * cfg.min_inlier_ratio
         ));
     }
     if r.runner_up_ratio > cfg.max_runner_up_ratio {
         return Some(format!(
-            "ambiguous: a different transform explains {:.0} % as much of the map as the best one \
-             (allowed {:.0} %); repetitive or symmetric structure?",
+            "ambiguous: a different transform is supported {:.0} % as well as the best one \
+             (allowed {:.0} %): repetitive or symmetric structure",
             100.0 * r.runner_up_ratio,
             100.0 * cfg.max_runner_up_ratio
         ));
@@ -215,8 +206,9 @@ fn verdict(r: &GlobalResult, cfg: &GlobalConfig) -> Option<String> {
     None
 }
 
-fn count_inliers(corr: &[Correspondence], cs: &[Vector3<f64>], ct: &[Vector3<f64>], t: &Pose, bound_m: f64) -> usize {
-    (0..corr.len()).filter(|&k| (t * Point3::from(cs[k]) - Point3::from(ct[k])).norm() <= bound_m).count()
+/// Feature correspondences within `bound_m` under `t`.
+fn count_inliers(cs: &[Vector3<f64>], ct: &[Vector3<f64>], t: &Pose, bound_m: f64) -> usize {
+    cs.iter().zip(ct).filter(|&(s, d)| (t * Point3::from(*s) - Point3::from(*d)).norm() <= bound_m).count()
 }
 
 fn empty_result(tgt: &MapCloud, src: &MapCloud) -> GlobalResult {
@@ -224,14 +216,14 @@ fn empty_result(tgt: &MapCloud, src: &MapCloud) -> GlobalResult {
         t_target_source: Pose::identity(),
         verdict: Verdict::Failure { reason: String::new() },
         correspondences: 0,
+        feature_inliers: 0,
         inliers: 0,
         inlier_ratio: 0.0,
         overlap_fraction: 0.0,
-        structure_fit: 0.0,
-        matched_structure: 0,
         clique_size: 0,
         runner_up_ratio: 0.0,
         hypotheses: 0,
+        refined: 0,
         target_points: tgt.len(),
         source_points: src.len(),
         elapsed_s: 0.0,
@@ -246,4 +238,51 @@ fn fail(mut r: GlobalResult, start: Instant, timings: GlobalTimings, reason: Str
     r.elapsed_s = start.elapsed().as_secs_f64();
     r.timings = timings;
     r
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn reason(r: &GlobalResult) -> &str {
+        match &r.verdict {
+            Verdict::Failure { reason } => reason,
+            Verdict::Success => "",
+        }
+    }
+
+    #[test]
+    fn empty_and_tiny_maps_fail_with_a_reason() {
+        let cfg = GlobalConfig::default();
+        let tiny: Vec<[f32; 3]> = (0..50).map(|i| [i as f32 * 0.1, 0.0, 0.0]).collect();
+        for (t, s) in [(&[][..], &[][..]), (&tiny[..], &tiny[..])] {
+            let r = register_maps(t, s, &cfg);
+            assert!(reason(&r).contains("too little structure"), "{:?}", r.verdict);
+            assert!(reason(&r).contains("unaligned"));
+            assert_eq!(r.t_target_source, Pose::identity());
+        }
+    }
+
+    #[test]
+    fn invalid_settings_fail_before_any_work() {
+        for cfg in [
+            GlobalConfig { voxel_size_m: 0.0, ..GlobalConfig::default() },
+            GlobalConfig { feature_radius_m: f64::NAN, ..GlobalConfig::default() },
+            GlobalConfig { normal_radius_m: 0.6, ..GlobalConfig::default() },
+            GlobalConfig { min_inlier_ratio: 62.0, ..GlobalConfig::default() },
+        ] {
+            let r = register_maps(&[[0.0; 3]], &[[0.0; 3]], &cfg);
+            assert!(reason(&r).starts_with("invalid global registration settings"), "{:?}", r.verdict);
+        }
+    }
+
+    #[test]
+    fn config_reads_from_toml_naming_only_what_changes() {
+        let cfg: GlobalConfig = toml::from_str("voxel_size_m = 0.7\ngravity_aligned = false").unwrap();
+        assert_eq!(cfg.voxel_size_m, 0.7);
+        assert!(!cfg.gravity_aligned);
+        assert_eq!(cfg.feature_radius_m, GlobalConfig::default().feature_radius_m);
+        assert!(toml::from_str::<GlobalConfig>("voxel_sise_m = 0.7").is_err());
+        assert!(GlobalConfig::default().validate().is_ok());
+    }
 }

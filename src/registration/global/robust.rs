@@ -136,7 +136,7 @@ pub fn gnc_tls(src: &[Vector3<f64>], tgt: &[Vector3<f64>], noise_bound_m: f64, d
 /// Weighted least-squares rigid fit `tgt ≈ T src` (see the module doc).
 pub fn weighted_fit(src: &[Vector3<f64>], tgt: &[Vector3<f64>], w: &[f64], dof: Dof) -> Option<Pose> {
     let wsum: f64 = w.iter().sum();
-    if !(wsum > 0.0) {
+    if wsum.is_nan() || wsum <= 0.0 {
         return None;
     }
     let mean = |pts: &[Vector3<f64>]| pts.iter().zip(w).fold(Vector3::zeros(), |a, (p, wi)| a + p * *wi) / wsum;
