@@ -87,6 +87,15 @@ impl KdTree {
         let found = tree.query(q).nearest_n::<SquaredEuclidean<f32>>(k).within(max_dist2).unsorted().execute();
         out.extend(found.into_iter().map(|r| (r.item as usize, r.distance)));
     }
+
+    /// Every point within `max_dist2` (squared, m²) of `q`, in no particular
+    /// order, into `out` (cleared first): `(index, squared distance in m²)`.
+    /// Indices are `u32`, as kiddo stores them, to keep large neighbour lists small.
+    pub fn within_unsorted(&self, q: &[f32; 3], max_dist2: f32, out: &mut Vec<(u32, f32)>) {
+        out.clear();
+        let Some(tree) = self.tree.as_ref() else { return };
+        tree.query(q).within::<SquaredEuclidean<f32>>(max_dist2).unsorted().visit(|r| out.push((r.item, r.distance)));
+    }
 }
 
 /// Brute-force k nearest neighbours, the reference the kd-tree is tested against.

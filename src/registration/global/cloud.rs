@@ -7,60 +7,41 @@
 //! so everything downstream (descriptors, point-to-plane residuals, the
 //! structure test) is written to be invariant to the sign.
 
-use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
 
 use crate::registration::covariance::smallest_eigenvector;
 use crate::registration::downsample::{Point3Like, voxel_downsample};
+use crate::registration::kdtree::KdTree;
+pub use crate::registration::kdtree::to_f32;
 
 /// Fewer neighbours than this (the point included) within the normal radius
 /// leave the local plane undetermined: the point gets no normal.
 pub const MIN_NORMAL_NEIGHBORS: usize = 5;
 
-/// A static kd-tree over 3-D points; results index the slice it was built from.
+/// A static kd-tree over 3-D points with an `f64` query interface; results
+/// index the slice it was built from. A thin front of [`KdTree`], which owns
+/// the kiddo plumbing.
+#[derive(Debug)]
 pub struct PointTree {
-    /// `None` for an empty point set (kiddo cannot build an empty tree).
-    tree: Option<ImmutableKdTree<f32, 3>>,
-}
-
-impl std::fmt::Debug for PointTree {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("PointTree").field("empty", &self.tree.is_none()).finish()
-    }
-}
-
-#[inline]
-pub fn to_f32(p: &[f64; 3]) -> [f32; 3] {
-    [p[0] as f32, p[1] as f32, p[2] as f32]
+    tree: KdTree,
 }
 
 impl PointTree {
     pub fn build(points: &[[f64; 3]]) -> PointTree {
-        let pts: Vec<[f32; 3]> = points.iter().map(to_f32).collect();
-        let tree = if pts.is_empty() || pts.len() > u32::MAX as usize {
-            None
-        } else {
-            ImmutableKdTree::<f32, 3>::new_from_slice(&pts).ok()
-        };
-        PointTree { tree }
+        PointTree { tree: KdTree::build(points) }
     }
 
     /// Every point within `radius_m` of `q` (unsorted) into `out` (cleared
     /// first): `(index, squared distance m²)`.
     pub fn within(&self, q: &[f64; 3], radius_m: f64, out: &mut Vec<(u32, f32)>) {
-        out.clear();
-        let Some(tree) = self.tree.as_ref() else { return };
-        let r2 = (radius_m * radius_m) as f32;
-        tree.query(&to_f32(q)).within::<SquaredEuclidean<f32>>(r2).unsorted().visit(|r| out.push((r.item, r.distance)));
+        self.tree.within_unsorted(&to_f32(q), (radius_m * radius_m) as f32, out);
     }
 
     /// The nearest point to `q`: `(index, squared distance m²)`.
     #[inline]
     pub fn nearest(&self, q: &[f64; 3]) -> Option<(usize, f64)> {
-        let tree = self.tree.as_ref()?;
-        let nn = tree.query(&to_f32(q)).nearest_one::<SquaredEuclidean<f32>>().execute();
-        Some((nn.item as usize, nn.distance as f64))
+        self.tree.nearest(&to_f32(q)).map(|(i, d2)| (i, d2 as f64))
     }
 }
 
