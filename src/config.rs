@@ -17,6 +17,14 @@ use std::path::{Path, PathBuf};
 pub struct Config {
     pub submap: SubmapConfig,
     pub ingest: IngestConfig,
+    /// Maps for the coarse alignment (MATH.md §2).
+    pub coarse: crate::align::CoarseConfig,
+    /// Global map-to-map registration (MATH.md §2).
+    pub global: crate::registration::global::GlobalConfig,
+    /// Loop candidates, GICP and the DOP test (MATH.md §3-4).
+    pub loops: crate::registration::LoopConfig,
+    /// The pose graph (MATH.md §5).
+    pub graph: crate::graph::GraphConfig,
 }
 
 /// Submap cutting (MATH.md §1).

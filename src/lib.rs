@@ -35,8 +35,10 @@
 //! # Ok(()) }
 //! ```
 
+pub mod align;
 pub mod cli;
 pub mod config;
+pub mod eval;
 pub mod fault;
 pub mod geometry;
 pub mod graph;

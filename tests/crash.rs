@@ -42,7 +42,15 @@ fn abort_at_every_fault_point_then_resume() {
     assert!(o.status.success());
     let points: Vec<String> =
         stderr(&o).lines().filter_map(|l| l.strip_prefix("seam-fault-point ")).map(String::from).collect();
-    for expected in ["scans:before_rename", "scans:before_commit", "submaps:before_commit", "complete:before_commit"] {
+    for expected in [
+        "scans:before_rename",
+        "scans:before_commit",
+        "submaps:before_commit",
+        "coarse_align:before_commit",
+        "loops:before_commit",
+        "optimize:before_commit",
+        "complete:before_commit",
+    ] {
         assert!(points.iter().any(|p| p == expected), "fault point {expected} not reached; saw {points:?}");
     }
     let want = store_state(&reference);

@@ -52,7 +52,7 @@ pub fn run(ctx: &Ctx, a: DemoArgs) -> anyhow::Result<()> {
     )?);
     let mut receipts = Vec::new();
     for s in &sim.sessions {
-        let r = super::ingest::ingest_one(ctx, &store_path, &s.dir, None, false)?;
+        let r = super::ingest::ingest_one(ctx, &store_path, &s.dir, &crate::pipeline::IngestOptions::default())?;
         log(
             ctx,
             format!(

@@ -54,6 +54,13 @@ pub fn exit_kind(err: &anyhow::Error) -> ExitKind {
                 _ => ExitKind::Internal,
             };
         }
+        if let Some(e) = cause.downcast_ref::<crate::eval::EvalError>() {
+            return match e {
+                crate::eval::EvalError::Store(s) => store_kind(s),
+                crate::eval::EvalError::Truth(_) | crate::eval::EvalError::Mismatch(_) => ExitKind::Data,
+                crate::eval::EvalError::Solve(_) => ExitKind::Internal,
+            };
+        }
         if cause.downcast_ref::<super::UsageError>().is_some() {
             return ExitKind::Usage;
         }

@@ -1,7 +1,8 @@
-//! `seam ingest site.seam SESSION_DIR [--name s4] [--dry-run]`
+//! `seam ingest site.seam SESSION_DIR [--name s4] [--dry-run] [--initial-guess x,y,z,yaw] [--anchors MODE]`
 
 use super::Ctx;
 use super::output::{Bars, json, log, print_json, thousands};
+use crate::graph::AnchorMode;
 use crate::pipeline::{IngestOptions, IngestReceipt, IngestStatus, ingest_session};
 use crate::store::Store;
 use clap::Args;
@@ -19,10 +20,33 @@ pub struct IngestArgs {
     /// Validate the session only; change nothing.
     #[arg(long)]
     pub dry_run: bool,
+    /// Where the session's first pose sits in the world, `x,y,z,yaw_deg`,
+    /// when global registration cannot find it (refined by ICP on the maps).
+    #[arg(long, value_name = "X,Y,Z,YAW_DEG", allow_hyphen_values = true, value_parser = parse_guess)]
+    pub initial_guess: Option<crate::geometry::Pose>,
+    /// Anchors of the joint optimisation: submap (default), session, or fixed
+    /// (earlier sessions frozen). For comparisons; see `seam eval align`.
+    #[arg(long, value_parser = parse_mode)]
+    pub anchors: Option<AnchorMode>,
+}
+
+fn parse_guess(s: &str) -> Result<crate::geometry::Pose, String> {
+    crate::align::coarse::parse_initial_guess(s)
+}
+
+pub fn parse_mode(s: &str) -> Result<AnchorMode, String> {
+    match s {
+        "submap" => Ok(AnchorMode::Submap),
+        "session" => Ok(AnchorMode::Session),
+        "fixed" => Ok(AnchorMode::Fixed),
+        _ => Err(format!("{s:?} is not an anchor mode: use submap, session or fixed")),
+    }
 }
 
 pub fn run(ctx: &Ctx, a: IngestArgs) -> anyhow::Result<()> {
-    let receipt = ingest_one(ctx, &a.store, &a.session, a.name, a.dry_run)?;
+    let opts =
+        IngestOptions { name: a.name, dry_run: a.dry_run, initial_guess: a.initial_guess, anchor_mode: a.anchors };
+    let receipt = ingest_one(ctx, &a.store, &a.session, &opts)?;
     if json(ctx) {
         print_json(&receipt)?;
     } else {
@@ -36,12 +60,11 @@ pub fn ingest_one(
     ctx: &Ctx,
     store: &std::path::Path,
     session: &std::path::Path,
-    name: Option<String>,
-    dry_run: bool,
+    opts: &IngestOptions,
 ) -> anyhow::Result<IngestReceipt> {
     let mut store = Store::open(store)?;
     let bars = Bars::new(ctx, session.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default());
-    let receipt = ingest_session(&mut store, session, &IngestOptions { name, dry_run }, &ctx.config, &bars)?;
+    let receipt = ingest_session(&mut store, session, opts, &ctx.config, &bars)?;
     if receipt.status == IngestStatus::AlreadyPresent {
         log(
             ctx,

@@ -10,6 +10,7 @@
 
 mod check;
 mod demo;
+mod eval;
 mod exit;
 mod ingest;
 mod init;
@@ -70,6 +71,9 @@ pub enum Command {
     Simulate(simulate::SimulateArgs),
     /// Simulate a site and ingest every session: the whole job on a default.
     Demo(demo::DemoArgs),
+    /// Measure the store against ground truth.
+    #[command(subcommand)]
+    Eval(eval::EvalCommand),
 }
 
 /// Shared settings resolved once from the global flags.
@@ -118,5 +122,6 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Poses(a) => poses::run(&ctx, a),
         Command::Simulate(a) => simulate::run(&ctx, a),
         Command::Demo(a) => demo::run(&ctx, a),
+        Command::Eval(c) => eval::run(&ctx, c),
     }
 }

@@ -29,6 +29,11 @@ pub struct IngestOptions {
     pub name: Option<String>,
     /// Validate only; write nothing.
     pub dry_run: bool,
+    /// Where the session's frame sits in the world (`--initial-guess`),
+    /// used instead of global registration.
+    pub initial_guess: Option<crate::geometry::Pose>,
+    /// Anchor mode of this ingest's optimisation (default: `config.graph.mode`).
+    pub anchor_mode: Option<crate::graph::AnchorMode>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
@@ -177,6 +182,8 @@ pub fn ingest_session(
         session: existing.as_ref().map(|s| s.session_id),
         name: receipt.name.clone(),
         content_hash: hash,
+        initial_guess: opts.initial_guess,
+        anchor_mode: opts.anchor_mode,
     };
     for (seq, step) in STEPS.iter().enumerate() {
         if done.iter().any(|d| d == step.name) {

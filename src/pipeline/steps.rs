@@ -4,14 +4,17 @@
 //! it in [`STEPS`]; the resume logic needs nothing else.
 
 use super::{IngestError, Progress};
+use crate::align::{self, SessionState, maps::ScanLoader};
 use crate::config::Config;
 use crate::fault;
 use crate::geometry::Pose;
+use crate::graph::AnchorMode;
 use crate::io::{SessionSource, read_session_scan};
-use crate::store::{self, FileRecord, KeyframeId, NewKeyframe, NewSession, ScanWriter, SessionId, Store, SubmapId};
+use crate::store::{self, FileRecord, KeyframeRow, NewKeyframe, NewSession, ScanWriter, SessionId, Store};
 use rayon::prelude::*;
 use rusqlite::Transaction;
 use serde_json::{Value, json};
+use std::collections::HashSet;
 use std::time::Instant;
 
 /// A named step of the ingest pipeline.
@@ -24,7 +27,9 @@ pub(super) struct Step {
 pub(super) const STEPS: &[Step] = &[
     Step { name: "scans", run: store_scans },
     Step { name: "submaps", run: make_submaps },
-    Step { name: "initial_graph", run: initial_graph },
+    Step { name: "coarse_align", run: coarse_align },
+    Step { name: "loops", run: find_loops },
+    Step { name: "optimize", run: optimize_graph },
     Step { name: "complete", run: complete },
 ];
 
@@ -38,6 +43,10 @@ pub(super) struct StepCtx<'a> {
     pub session: Option<SessionId>,
     pub name: String,
     pub content_hash: String,
+    /// `--initial-guess`: `t_world_session` for the coarse alignment.
+    pub initial_guess: Option<Pose>,
+    /// Overrides `config.graph.mode`.
+    pub anchor_mode: Option<AnchorMode>,
 }
 
 impl StepCtx<'_> {
@@ -150,35 +159,150 @@ fn make_submaps(ctx: &mut StepCtx<'_>, step: &'static str, seq: i64) -> Result<V
     })
 }
 
-/// Step `initial_graph`: a graph version that adds this session from its
-/// odometry (MATH.md §1: `A_m = t_world_session · odom_first`,
-/// `p_i = odom_first⁻¹ · odom_i`, with `t_world_session = I` until alignment
-/// exists) to the newest version of the earlier sessions.
-fn initial_graph(ctx: &mut StepCtx<'_>, step: &'static str, seq: i64) -> Result<Value, IngestError> {
+/// The sessions alignment works on: every complete session and this one,
+/// with poses from the newest graph version.
+fn alignment_state(ctx: &StepCtx<'_>) -> Result<(ScanLoader, Vec<SessionState>, usize), IngestError> {
+    let session = ctx.session()?;
+    let loader = ScanLoader::new(ctx.store)?;
+    let version = store::latest_graph_version(ctx.store.conn())?;
+    let mut sessions = align::load_sessions(ctx.store, &loader, version, &|_| None)?;
+    sessions.retain(|s| s.row.status == "complete" || s.id() == session);
+    let new = sessions.iter().position(|s| s.id() == session).ok_or_else(|| store::StoreError::Corrupt {
+        path: ctx.store.root().to_path_buf(),
+        message: format!("session {} has no rows to align", session.0),
+    })?;
+    Ok((loader, sessions, new))
+}
+
+/// Step `coarse_align` (MATH.md §2): where the new session's frame sits in
+/// the world. The first session is the reference; later ones are registered
+/// map-to-map against the earlier sessions' merged map (or placed by
+/// `--initial-guess`). Commits the alignment row and a graph version that
+/// adds the session at `t_world_session · odometry`.
+fn coarse_align(ctx: &mut StepCtx<'_>, step: &'static str, seq: i64) -> Result<Value, IngestError> {
     let started_at = store::now_utc();
     let t0 = Instant::now();
     let session = ctx.session()?;
-    let conn = ctx.store.conn();
-    let kfs = store::keyframes(conn, session)?;
-    let submaps = store::submaps(conn, session)?;
-    let base = store::latest_graph_version(conn)?;
-    let mut anchors: Vec<(SubmapId, Pose)> = Vec::with_capacity(submaps.len());
-    let mut locals: Vec<(KeyframeId, Pose)> = Vec::with_capacity(kfs.len());
-    for sm in &submaps {
-        let members: Vec<_> = kfs
+    let (loader, sessions, new) = alignment_state(ctx)?;
+    let cc = &ctx.config.coarse;
+    let stride = cc.map_keyframe_stride.max(1);
+    let row = if sessions.len() == 1 {
+        align::coarse::reference(session)
+    } else {
+        ctx.progress.begin("coarse alignment", 3);
+        let earlier: Vec<(&KeyframeRow, Pose)> = sessions
             .iter()
-            .filter(|k| k.keyframe_index >= sm.first_keyframe && k.keyframe_index <= sm.last_keyframe)
+            .enumerate()
+            .filter(|(i, _)| *i != new)
+            .flat_map(|(_, s)| s.keyframes.iter().step_by(stride).map(|k| (&k.row, k.t_world_keyframe)))
             .collect();
-        let Some(first) = members.first() else { continue };
-        let t_world_submap = first.t_session_keyframe;
-        anchors.push((sm.submap_id, t_world_submap));
-        let inv = t_world_submap.inverse();
-        locals.extend(members.iter().map(|k| (k.keyframe_id, inv * k.t_session_keyframe)));
+        let world_map = align::maps::merged_map(&loader, &earlier, cc.map_voxel_m)?;
+        ctx.progress.advance(1);
+        let mine: Vec<(&KeyframeRow, Pose)> =
+            sessions[new].keyframes.iter().step_by(stride).map(|k| (&k.row, k.row.t_session_keyframe)).collect();
+        let session_map = align::maps::merged_map(&loader, &mine, cc.map_voxel_m)?;
+        ctx.progress.advance(1);
+        let row = align::coarse::coarse_align(session, &world_map, &session_map, ctx.initial_guess, &ctx.config.global);
+        ctx.progress.advance(1);
+        ctx.progress.end();
+        row
+    };
+    let t_world_session = row.t_world_session;
+    let mut placed = sessions[new].clone();
+    for k in &mut placed.keyframes {
+        k.t_world_keyframe = t_world_session * k.row.t_session_keyframe;
     }
+    let world = align::graph::current(std::slice::from_ref(&placed));
+    let (anchors, locals) = align::graph::to_version_rows(std::slice::from_ref(&placed), &world);
+    let base = store::latest_graph_version(ctx.store.conn())?;
+    let details = json!({
+        "method": row.method,
+        "success": row.success,
+        "reason": row.reason,
+        "inliers": row.inliers,
+        "inlier_ratio": row.inlier_ratio,
+        "overlap_fraction": row.overlap_fraction,
+    });
     ctx.commit(step, seq, (&started_at, t0), |tx| {
-        let version = store::insert_graph_version(tx, session, "odometry", "{}", base, &anchors, &locals)?;
-        Ok((session, json!({ "graph_version": version, "anchors": anchors.len() })))
+        store::insert_alignment(tx, &row)?;
+        let version =
+            store::insert_graph_version(tx, session, "coarse", &details.to_string(), base, &anchors, &locals)?;
+        let mut details = details;
+        details["graph_version"] = json!(version);
+        Ok((session, details))
     })
+}
+
+/// Step `loops` (MATH.md §3-4): intra- and inter-session candidates of the
+/// new session, each registered with GICP and judged; every candidate is
+/// stored with its verdict and reason.
+fn find_loops(ctx: &mut StepCtx<'_>, step: &'static str, seq: i64) -> Result<Value, IngestError> {
+    let started_at = store::now_utc();
+    let t0 = Instant::now();
+    let session = ctx.session()?;
+    let (loader, sessions, new) = alignment_state(ctx)?;
+    let aligned = store::alignment(ctx.store.conn(), session)?.map(|a| a.success).unwrap_or(false);
+    let cfg = &ctx.config.loops;
+    let mut candidates = align::loops::intra_candidates(&sessions, new, cfg);
+    let intra = candidates.len();
+    if aligned {
+        candidates.extend(align::loops::inter_candidates(&sessions, new, cfg));
+    }
+    let rows = align::loops::evaluate(&loader, &sessions, &candidates, session, cfg, ctx.progress)?;
+    let accepted = |kind: &str| rows.iter().filter(|r| r.accepted && r.kind == kind).count();
+    let details = json!({
+        "intra_candidates": intra,
+        "inter_candidates": candidates.len() - intra,
+        "intra_accepted": accepted("intra"),
+        "inter_accepted": accepted("inter"),
+        "inter_skipped_unaligned": !aligned,
+    });
+    ctx.commit(step, seq, (&started_at, t0), |tx| {
+        store::insert_loops(tx, &rows)?;
+        Ok((session, details))
+    })
+}
+
+/// Step `optimize` (MATH.md §5): all sessions jointly, odometry plus every
+/// accepted loop, in the configured anchor mode; a new graph version.
+fn optimize_graph(ctx: &mut StepCtx<'_>, step: &'static str, seq: i64) -> Result<Value, IngestError> {
+    let started_at = store::now_utc();
+    let t0 = Instant::now();
+    let session = ctx.session()?;
+    let (_loader, sessions, _new) = alignment_state(ctx)?;
+    let loops = store::loops(ctx.store.conn(), true)?;
+    let mode = ctx.anchor_mode.unwrap_or(ctx.config.graph.mode);
+    let frozen: HashSet<SessionId> = sessions.iter().map(|s| s.id()).filter(|&id| id != session).collect();
+    let initial = align::graph::current(&sessions);
+    ctx.progress.begin("optimize", 1);
+    let solved = align::graph::solve(&sessions, &initial, &loops, mode, &frozen, &ctx.config.graph);
+    ctx.progress.end();
+    let (world, details) = match solved {
+        Ok((world, report, used)) => {
+            let moved = max_move(&initial, &world);
+            (world, json!({ "mode": mode.name(), "loops": used, "report": report, "max_keyframe_move_m": moved }))
+        }
+        // A graph the solver cannot handle keeps the current estimate; the
+        // step log says so (and `seam info` shows it).
+        Err(e) => (initial, json!({ "mode": mode.name(), "error": e.to_string() })),
+    };
+    let (anchors, locals) = align::graph::to_version_rows(&sessions, &world);
+    let base = store::latest_graph_version(ctx.store.conn())?;
+    ctx.commit(step, seq, (&started_at, t0), |tx| {
+        let version =
+            store::insert_graph_version(tx, session, mode.name(), &details.to_string(), base, &anchors, &locals)?;
+        let mut details = details;
+        details["graph_version"] = json!(version);
+        Ok((session, details))
+    })
+}
+
+/// The largest distance any keyframe moved between two estimates, m.
+fn max_move(a: &align::graph::WorldPoses, b: &align::graph::WorldPoses) -> f64 {
+    a.iter()
+        .zip(b)
+        .flat_map(|(x, y)| x.iter().zip(y).map(|(p, q)| (p.translation.vector - q.translation.vector).norm()))
+        .fold(0.0, f64::max)
 }
 
 /// Step `complete`: marks the session complete.

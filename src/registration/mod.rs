@@ -27,6 +27,7 @@
 //! - `covariance`: k-NN covariances regularised to planes.
 //! - `gicp`: preprocessing and the Levenberg-Marquardt loop.
 //! - `dop`: `g0`, solid angles, ρ, the ratio test, FoV estimation.
+//! - `loop_check`: one loop candidate: GICP, then the acceptance rules.
 //! - `global`: coarse map-to-map alignment (MATH.md §2), a module of its own.
 
 pub mod covariance;
@@ -35,7 +36,9 @@ pub mod downsample;
 pub mod gicp;
 pub mod global;
 pub mod kdtree;
+pub mod loop_check;
 pub mod se3;
 
 pub use dop::{DopConfig, DopReason, DopVerdict, RhoReport, estimate_fov, g0, reliability_test, rho, solid_angle_sr};
 pub use gicp::{GicpConfig, GicpResult, GicpTarget, PreparedCloud, align, preprocess};
+pub use loop_check::{LoopConfig, LoopReason, LoopVerdict, verify_loop};

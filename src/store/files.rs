@@ -21,6 +21,20 @@ use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
+/// `file_id → absolute path` of every file of `kind` the store references.
+pub fn file_paths(store: &super::Store, kind: &str) -> Result<std::collections::HashMap<i64, PathBuf>, StoreError> {
+    let conn = store.conn();
+    let root = store.root();
+    let mut st = conn.prepare("SELECT file_id, rel_path FROM files WHERE kind = ?1").map_err(|e| sql(root, e))?;
+    let rows = st.query_map([kind], |r| Ok((r.get::<_, i64>(0)?, r.get::<_, String>(1)?))).map_err(|e| sql(root, e))?;
+    let mut out = std::collections::HashMap::new();
+    for row in rows {
+        let (id, rel) = row.map_err(|e| sql(root, e))?;
+        out.insert(id, store.path_of(&rel));
+    }
+    Ok(out)
+}
+
 /// A published file, ready to be recorded in `files`.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct FileRecord {

@@ -29,7 +29,7 @@ mod schema;
 
 pub use alignment::*;
 pub use check::{CheckReport, FileProblem};
-pub use files::{FileRecord, ScanWriter, insert_file, read_scan_row_group};
+pub use files::{FileRecord, ScanWriter, file_paths, insert_file, read_scan_row_group};
 pub use rows::*;
 pub use schema::{SCHEMA_SQL, SCHEMA_VERSION};
 

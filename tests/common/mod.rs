@@ -87,10 +87,10 @@ pub fn snapshot_files(root: &Path) -> Vec<(String, Vec<u8>)> {
 }
 
 /// Columns whose values are wall-clock times and differ between runs.
-const TIME_COLUMNS: &[&str] = &["created_at", "completed_at", "started_at", "finished_at", "wall_s"];
+const TIME_COLUMNS: &[&str] = &["created_at", "completed_at", "started_at", "finished_at", "wall_s", "elapsed_s"];
 
 /// The content of every table of a store's database, rows sorted, time
-/// columns left out; `details_json` keeps only its non-timing keys.
+/// columns left out (steps keep timings out of `details_json`).
 pub fn dump_db(store: &Path) -> String {
     let conn = rusqlite::Connection::open_with_flags(store.join("seam.db"), rusqlite::OpenFlags::SQLITE_OPEN_READ_ONLY)
         .expect("open seam.db");
