@@ -53,17 +53,30 @@ pub fn reference(session: SessionId) -> AlignmentRow {
     }
 }
 
+/// `t_world_session` from a guess of where the session's first keyframe is
+/// (`x, y, z`, yaw about the world's z): the keyframe keeps its odometry
+/// tilt (roll, pitch), its yaw and position become the guess's.
+pub fn placement_from_first_keyframe(guess: &Pose, t_session_first: &Pose) -> Pose {
+    let (_, _, yaw0) = t_session_first.rotation.euler_angles();
+    let tilt = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), -yaw0) * t_session_first.rotation;
+    let t_world_first = Pose::from_parts(guess.translation, guess.rotation * tilt);
+    t_world_first * t_session_first.inverse()
+}
+
 /// Aligns `session_map` (the new session's keyframes merged by odometry, in
 /// its session frame) to `world_map` (the earlier sessions, world frame).
+/// `initial_guess` is the world pose of the session's first keyframe
+/// (`t_session_first` is its odometry pose).
 pub fn coarse_align(
     session: SessionId,
     world_map: &[[f32; 3]],
     session_map: &[[f32; 3]],
-    initial_guess: Option<Pose>,
+    initial_guess: Option<(Pose, Pose)>,
     cfg: &GlobalConfig,
 ) -> AlignmentRow {
     let t0 = Instant::now();
-    if let Some(guess) = initial_guess {
+    if let Some((guess, t_session_first)) = initial_guess {
+        let guess = placement_from_first_keyframe(&guess, &t_session_first);
         let refined = refine_guess(world_map, session_map, &guess, cfg);
         return AlignmentRow {
             session_id: session,
@@ -86,7 +99,8 @@ pub fn coarse_align(
             false,
             format!(
                 "global registration failed: {reason}; the session keeps its own frame and has no inter-session \
-                 loops. Re-ingest it with --initial-guess x,y,z,yaw_deg (where its first pose is in the world)"
+                 loops. Re-ingest it into a store without it, with --initial-guess x,y,z,yaw_deg (where its first \
+                 keyframe is in the world)"
             ),
             Pose::identity(),
         ),
@@ -125,6 +139,19 @@ fn refine_guess(world_map: &[[f32; 3]], session_map: &[[f32; 3]], guess: &Pose, 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_guess_places_the_first_keyframe_and_keeps_its_tilt() {
+        let first =
+            Pose::from_parts(Translation3::new(5.0, -3.0, 0.4), UnitQuaternion::from_euler_angles(0.02, -0.03, 1.2));
+        let guess = pose_from_xyz_yaw(10.0, 20.0, 1.0, -60.0);
+        let t_world_session = placement_from_first_keyframe(&guess, &first);
+        let placed = t_world_session * first;
+        assert!((placed.translation.vector - Vector3::new(10.0, 20.0, 1.0)).norm() < 1e-9);
+        let (r, p, y) = placed.rotation.euler_angles();
+        assert!((r - 0.02).abs() < 1e-9 && (p + 0.03).abs() < 1e-9, "tilt lost: {r} {p}");
+        assert!((y - (-60f64).to_radians()).abs() < 1e-9);
+    }
 
     #[test]
     fn initial_guess_parses_and_rejects_garbage() {

@@ -1,9 +1,10 @@
 //! Loop candidates (MATH.md §3) and their verification.
 //!
 //! - **Inter-session**: every `keyframe_stride`-th keyframe of the new
-//!   session is paired with the nearest keyframe of all earlier sessions in
-//!   the current world estimate, if within `radius_m`. Not for an unaligned
-//!   session: its estimate says nothing about where it is.
+//!   session is paired with the nearest keyframe of each earlier aligned
+//!   session in the current world estimate, if within `radius_m` (the
+//!   `max_sessions_per_keyframe` nearest of those). Not for
+//!   an unaligned session: its estimate says nothing about where it is.
 //! - **Intra-session**: the same keyframes are paired with the nearest
 //!   keyframe of their own session's past that is at least
 //!   `intra_min_travel_m` of travel behind (a revisit, not a neighbour).
@@ -11,8 +12,9 @@
 //! Each candidate registers the source keyframe's scan (sensor frame) against
 //! the target keyframe's local map (it and its ±`neighbours` neighbours in
 //! the target's frame, by current poses) from the current relative estimate,
-//! then applies [`verify_loop`]. Work is parallel over candidates, in batches
-//! of targets so that only a few local maps are in memory at once.
+//! then applies [`verify_loop`]. Work goes in batches of source keyframes
+//! (each scan preprocessed once, each local map built once and kept while
+//! the next batch still needs it), parallel within a batch.
 
 use super::SessionState;
 use super::maps::{ScanLoader, transformed};
@@ -59,31 +61,42 @@ fn position(s: &[SessionState], k: KfRef) -> [f64; 3] {
     s[k.0].keyframes[k.1].t_world_keyframe.translation.vector.into()
 }
 
-/// Inter-session candidates of session `new` against every other session.
+/// Inter-session candidates of session `new`: for every
+/// `keyframe_stride`-th keyframe, the nearest keyframe of each earlier
+/// aligned session within `radius_m`, keeping the `max_sessions_per_keyframe`
+/// nearest (MATH.md §3 names the nearest of the earlier sessions; more than
+/// one ties more sessions in, not only the one that happens to be nearest).
 pub fn inter_candidates(sessions: &[SessionState], new: usize, cfg: &LoopConfig) -> Vec<Candidate> {
-    let others: Vec<KfRef> = (0..sessions.len())
-        .filter(|&s| s != new)
-        .flat_map(|s| (0..sessions[s].keyframes.len()).map(move |k| (s, k)))
-        .collect();
-    if others.is_empty() {
-        return Vec::new();
-    }
-    let positions: Vec<[f64; 3]> = others.iter().map(|&k| position(sessions, k)).collect();
-    let tree = KdTree::build(&positions);
     let r2 = (cfg.radius_m * cfg.radius_m) as f32;
-    (0..sessions[new].keyframes.len())
-        .step_by(cfg.keyframe_stride.max(1))
-        .filter_map(|k| {
-            let p = position(sessions, (new, k));
-            let (i, d2) = tree.nearest(&to_f32(&p))?;
-            (d2 <= r2).then(|| Candidate {
-                kind: LoopKind::Inter,
-                source: (new, k),
-                target: others[i],
-                distance_m: (d2 as f64).sqrt(),
-            })
-        })
-        .collect()
+    let mut out = Vec::new();
+    for (s, other) in sessions.iter().enumerate() {
+        if s == new || !other.aligned || other.keyframes.is_empty() {
+            continue;
+        }
+        let positions: Vec<[f64; 3]> = (0..other.keyframes.len()).map(|k| position(sessions, (s, k))).collect();
+        let tree = KdTree::build(&positions);
+        for k in (0..sessions[new].keyframes.len()).step_by(cfg.keyframe_stride.max(1)) {
+            let Some((i, d2)) = tree.nearest(&to_f32(&position(sessions, (new, k)))) else { continue };
+            if d2 <= r2 {
+                out.push(Candidate {
+                    kind: LoopKind::Inter,
+                    source: (new, k),
+                    target: (s, i),
+                    distance_m: (d2 as f64).sqrt(),
+                });
+            }
+        }
+    }
+    // The nearest `max_sessions_per_keyframe` per source keyframe.
+    out.sort_by(|a, b| a.source.1.cmp(&b.source.1).then(a.distance_m.total_cmp(&b.distance_m)));
+    let mut kept: Vec<Candidate> = Vec::with_capacity(out.len());
+    for c in out {
+        let n = kept.iter().rev().take_while(|k| k.source == c.source).count();
+        if n < cfg.max_sessions_per_keyframe.max(1) {
+            kept.push(c);
+        }
+    }
+    kept
 }
 
 /// Intra-session candidates (revisits) of session `new`.
@@ -128,8 +141,9 @@ fn local_map(
     Ok(preprocess(&pts, &cfg.gicp))
 }
 
-/// Targets whose local maps are built and held at once.
-const TARGET_BATCH: usize = 8;
+/// Source keyframes registered per batch; their targets' local maps are
+/// built once per batch (and kept for the next batch if it needs them).
+const SOURCE_BATCH: usize = 16;
 
 /// Registers and judges every candidate; `session` is the ingest that
 /// evaluates them (stored with each row). Rows come back in candidate order.
@@ -141,39 +155,49 @@ pub fn evaluate(
     cfg: &LoopConfig,
     progress: &dyn Progress,
 ) -> Result<Vec<LoopRow>, StoreError> {
-    // Candidates grouped by target, targets in a stable order.
-    let mut by_target: BTreeMap<KfRef, Vec<usize>> = BTreeMap::new();
+    // Candidates grouped by source, sources in trajectory order.
+    let mut by_source: BTreeMap<KfRef, Vec<usize>> = BTreeMap::new();
     for (i, c) in candidates.iter().enumerate() {
-        by_target.entry(c.target).or_default().push(i);
+        by_source.entry(c.source).or_default().push(i);
     }
-    let targets: Vec<(KfRef, Vec<usize>)> = by_target.into_iter().collect();
+    let sources: Vec<(KfRef, Vec<usize>)> = by_source.into_iter().collect();
     let mut rows: HashMap<usize, LoopRow> = HashMap::with_capacity(candidates.len());
     progress.begin("loops", candidates.len() as u64);
-    // Parallelism is within a batch: local maps, then candidates. GICP itself
-    // is serial here (`parallel` off) so that many run at once.
+    // Parallelism is over scans and candidates; GICP itself is serial here
+    // (`parallel` off) so that many registrations run at once.
     let mut gicp = cfg.gicp.clone();
     gicp.parallel = false;
     let cfg = &LoopConfig { gicp, ..cfg.clone() };
-    for batch in targets.chunks(TARGET_BATCH) {
-        let maps = batch
+    let mut maps: HashMap<KfRef, PreparedCloud> = HashMap::new();
+    for batch in sources.chunks(SOURCE_BATCH) {
+        let mut wanted: Vec<KfRef> =
+            batch.iter().flat_map(|(_, ids)| ids.iter().map(|&i| candidates[i].target)).collect();
+        wanted.sort();
+        wanted.dedup();
+        maps.retain(|t, _| wanted.contains(t));
+        let missing: Vec<KfRef> = wanted.iter().copied().filter(|t| !maps.contains_key(t)).collect();
+        let built = missing
             .par_iter()
-            .map(|(t, _)| local_map(loader, sessions, *t, cfg))
+            .map(|&t| Ok((t, local_map(loader, sessions, t, cfg)?)))
+            .collect::<Result<Vec<_>, StoreError>>()?;
+        maps.extend(built);
+        let prepared = batch
+            .par_iter()
+            .map(|(s, _)| Ok(preprocess(&loader.load(&sessions[s.0].keyframes[s.1].row)?.points, &cfg.gicp)))
             .collect::<Result<Vec<_>, StoreError>>()?;
         let jobs: Vec<(usize, usize)> =
-            batch.iter().enumerate().flat_map(|(m, (_, ids))| ids.iter().map(move |&i| (m, i))).collect();
-        let done = jobs
+            batch.iter().enumerate().flat_map(|(b, (_, ids))| ids.iter().map(move |&i| (b, i))).collect();
+        let done: Vec<(usize, LoopRow)> = jobs
             .par_iter()
-            .map(|&(m, i)| {
+            .map(|&(b, i)| {
                 let c = &candidates[i];
                 let src = &sessions[c.source.0].keyframes[c.source.1];
                 let tgt = &sessions[c.target.0].keyframes[c.target.1];
-                let scan = loader.load(&src.row)?;
-                let source = preprocess(&scan.points, &cfg.gicp);
                 let t_init: Pose = tgt.t_world_keyframe.inverse() * src.t_world_keyframe;
-                let v = verify_loop(&maps[m], &source, &t_init, &sessions[c.source.0].fov, cfg);
+                let v = verify_loop(&maps[&c.target], &prepared[b], &t_init, &sessions[c.source.0].fov, cfg);
                 progress.advance(1);
                 let finite = |x: f64| x.is_finite().then_some(x);
-                Ok((
+                (
                     i,
                     LoopRow {
                         session_id: session,
@@ -192,9 +216,9 @@ pub fn evaluate(
                         accepted: v.accepted,
                         reason: v.describe(),
                     },
-                ))
+                )
             })
-            .collect::<Result<Vec<_>, StoreError>>()?;
+            .collect();
         rows.extend(done);
     }
     progress.end();

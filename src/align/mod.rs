@@ -69,6 +69,10 @@ pub struct SessionState {
     pub keyframes: Vec<KeyframeState>,
     pub submaps: Vec<SubmapRow>,
     pub fov: Fov,
+    /// Placed in the world (reference, global or initial guess). Unaligned
+    /// sessions are neither part of the map others are registered against
+    /// nor loop targets.
+    pub aligned: bool,
 }
 
 impl SessionState {
@@ -121,7 +125,8 @@ pub fn load_sessions(
         }
         let first = keyframes.first().map(|k| k.row.clone());
         let fov = session_fov(&row, || first.and_then(|k| loader.load(&k).ok()).map(|s| s.points));
-        out.push(SessionState { row, keyframes, submaps, fov });
+        let aligned = store::alignment(conn, row.session_id)?.is_some_and(|a| a.success);
+        out.push(SessionState { row, keyframes, submaps, fov, aligned });
     }
     Ok(out)
 }

@@ -20,8 +20,9 @@ pub struct IngestArgs {
     /// Validate the session only; change nothing.
     #[arg(long)]
     pub dry_run: bool,
-    /// Where the session's first pose sits in the world, `x,y,z,yaw_deg`,
-    /// when global registration cannot find it (refined by ICP on the maps).
+    /// Where the session's first keyframe is in the world, `x,y,z,yaw_deg`
+    /// (the frame of `seam poses`), when global registration cannot find it;
+    /// refined by ICP on the maps.
     #[arg(long, value_name = "X,Y,Z,YAW_DEG", allow_hyphen_values = true, value_parser = parse_guess)]
     pub initial_guess: Option<crate::geometry::Pose>,
     /// Anchors of the joint optimisation: submap (default), session, or fixed

@@ -53,11 +53,12 @@ pub fn run_info(ctx: &Ctx, a: StoreArg) -> anyhow::Result<()> {
     let counts = store::table_counts(store.conn())?;
     let points: i64 = store::sessions(store.conn())?.iter().map(|s| s.point_count).sum();
     let bytes = dir_size(store.root());
+    let alignment = alignment_rows(&store)?;
     if json(ctx) {
         let counts: serde_json::Map<String, serde_json::Value> =
             counts.iter().map(|(k, v)| (k.clone(), (*v).into())).collect();
         return print_json(&serde_json::json!({
-            "meta": meta, "tables": counts, "points": points, "size_bytes": bytes,
+            "meta": meta, "tables": counts, "points": points, "size_bytes": bytes, "alignment": alignment,
             "bytes_per_million_points": if points > 0 { bytes as f64 * 1e6 / points as f64 } else { 0.0 },
         }));
     }
@@ -77,5 +78,59 @@ pub fn run_info(ctx: &Ctx, a: StoreArg) -> anyhow::Result<()> {
         String::new()
     };
     println!("size            {:.1} MB{per_m}", bytes as f64 / 1e6);
+    if !alignment.is_empty() {
+        println!();
+        let rows: Vec<Vec<String>> = alignment
+            .iter()
+            .map(|a| {
+                vec![
+                    a.session.to_string(),
+                    a.name.clone(),
+                    a.method.clone(),
+                    format!("{}/{}", a.inter_accepted, a.inter_candidates),
+                    format!("{}/{}", a.intra_accepted, a.intra_candidates),
+                    a.reason.clone(),
+                ]
+            })
+            .collect();
+        super::output::print_table(&["session", "name", "alignment", "inter loops", "intra loops", "note"], &rows);
+    }
     Ok(())
+}
+
+/// How each session was placed and how many of its loop candidates held.
+#[derive(serde::Serialize)]
+struct AlignmentSummary {
+    session: i64,
+    name: String,
+    method: String,
+    reason: String,
+    inter_candidates: i64,
+    inter_accepted: i64,
+    intra_candidates: i64,
+    intra_accepted: i64,
+}
+
+fn alignment_rows(store: &Store) -> anyhow::Result<Vec<AlignmentSummary>> {
+    let conn = store.conn();
+    let loops = store::loops(conn, false)?;
+    let mut out = Vec::new();
+    for s in store::sessions(conn)? {
+        let Some(a) = store::alignment(conn, s.session_id)? else { continue };
+        let count = |kind: &str, accepted: bool| {
+            loops.iter().filter(|l| l.session_id == s.session_id && l.kind == kind && (!accepted || l.accepted)).count()
+                as i64
+        };
+        out.push(AlignmentSummary {
+            session: s.session_id.0,
+            name: s.name.clone(),
+            method: a.method.clone(),
+            reason: if a.method == "reference" { String::new() } else { a.reason.clone() },
+            inter_candidates: count("inter", false),
+            inter_accepted: count("inter", true),
+            intra_candidates: count("intra", false),
+            intra_accepted: count("intra", true),
+        });
+    }
+    Ok(out)
 }

@@ -186,14 +186,14 @@ fn coarse_align(ctx: &mut StepCtx<'_>, step: &'static str, seq: i64) -> Result<V
     let (loader, sessions, new) = alignment_state(ctx)?;
     let cc = &ctx.config.coarse;
     let stride = cc.map_keyframe_stride.max(1);
-    let row = if sessions.len() == 1 {
+    let row = if !sessions.iter().enumerate().any(|(i, s)| i != new && s.aligned) {
         align::coarse::reference(session)
     } else {
         ctx.progress.begin("coarse alignment", 3);
         let earlier: Vec<(&KeyframeRow, Pose)> = sessions
             .iter()
             .enumerate()
-            .filter(|(i, _)| *i != new)
+            .filter(|(i, s)| *i != new && s.aligned)
             .flat_map(|(_, s)| s.keyframes.iter().step_by(stride).map(|k| (&k.row, k.t_world_keyframe)))
             .collect();
         let world_map = align::maps::merged_map(&loader, &earlier, cc.map_voxel_m)?;
@@ -202,7 +202,9 @@ fn coarse_align(ctx: &mut StepCtx<'_>, step: &'static str, seq: i64) -> Result<V
             sessions[new].keyframes.iter().step_by(stride).map(|k| (&k.row, k.row.t_session_keyframe)).collect();
         let session_map = align::maps::merged_map(&loader, &mine, cc.map_voxel_m)?;
         ctx.progress.advance(1);
-        let row = align::coarse::coarse_align(session, &world_map, &session_map, ctx.initial_guess, &ctx.config.global);
+        let first = sessions[new].keyframes.first().map(|k| k.row.t_session_keyframe).unwrap_or_else(Pose::identity);
+        let guess = ctx.initial_guess.map(|g| (g, first));
+        let row = align::coarse::coarse_align(session, &world_map, &session_map, guess, &ctx.config.global);
         ctx.progress.advance(1);
         ctx.progress.end();
         row
