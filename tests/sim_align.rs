@@ -68,8 +68,7 @@ fn sessions_are_aligned_jointly_within_a_decimetre() {
     // Frozen earlier sessions (LT-mapper's assumption) keep their drift:
     // joint optimisation must beat them after the last ingest.
     let steps = report["anchor_steps"].as_array().unwrap();
-    let last =
-        |mode: &str| steps.iter().filter(|s| s["mode"] == mode).last().unwrap()["max_ate_rmse_m"].as_f64().unwrap();
+    let last = |mode: &str| steps.iter().rfind(|s| s["mode"] == mode).unwrap()["max_ate_rmse_m"].as_f64().unwrap();
     assert!(last("submap") < last("fixed"), "submap {} vs fixed {}", last("submap"), last("fixed"));
 
     // `seam poses` gives every keyframe of every session, numbered as ingested.
