@@ -62,10 +62,11 @@ fn print_align(r: &AlignReport) {
                 mm(s.ate_rmse_m),
                 mm(s.ate_max_m),
                 mm(s.rigid_residual_m),
+                r.odometry_residual_m.get(s.session - 1).map(|&m| mm(m)).unwrap_or_default(),
             ]
         })
         .collect();
-    print_table(&["session", "name", "keyframes", "ate_rmse", "ate_max", "rigid_residual"], &rows);
+    print_table(&["session", "name", "keyframes", "ate_rmse", "ate_max", "rigid_residual", "odometry_residual"], &rows);
     let l = &r.loops;
     println!(
         "accepted loops: {} ({} wrong by > 0.3 m or 1°), error median {} / {:.2}°, max {}",
@@ -79,12 +80,14 @@ fn print_align(r: &AlignReport) {
         return;
     }
     println!();
-    println!("anchor modes re-solved after each ingest (same loops):");
+    println!("anchor modes re-solved after each ingest (same loops); residual = mean per-session rigid residual,");
+    println!("rigid = a session moved as one rigid body (its odometry's own residual):");
     let mut rows = Vec::new();
     for k in r.anchor_steps.iter().map(|s| s.sessions).collect::<std::collections::BTreeSet<_>>() {
         let step = |mode: &str| r.anchor_steps.iter().find(|s| s.sessions == k && s.mode == mode);
         let label = if k == 2 { "01+02".to_string() } else { format!("+{k:02}") };
         let mut row = vec![label];
+        row.push(step("submap").map(|s| mm(s.mean_rigid_session_residual_m)).unwrap_or_default());
         for mode in ["session", "submap"] {
             row.push(step(mode).map(|s| mm(s.mean_rigid_residual_m)).unwrap_or_default());
         }
@@ -93,5 +96,8 @@ fn print_align(r: &AlignReport) {
         }
         rows.push(row);
     }
-    print_table(&["step", "residual session", "residual submap", "ate fixed", "ate session", "ate submap"], &rows);
+    print_table(
+        &["step", "residual rigid", "residual session", "residual submap", "ate fixed", "ate session", "ate submap"],
+        &rows,
+    );
 }

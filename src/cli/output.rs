@@ -22,9 +22,11 @@ pub fn print_table(header: &[&str], rows: &[Vec<String>]) {
         let parts: Vec<String> = cells
             .iter()
             .enumerate()
-            .map(
-                |(i, c)| if numeric[i] { format!("{c:>w$}", w = widths[i]) } else { format!("{c:<w$}", w = widths[i]) },
-            )
+            .map(|(i, c)| {
+                // A row longer than the header prints its extra cells unpadded.
+                let w = widths.get(i).copied().unwrap_or(0);
+                if numeric.get(i).copied().unwrap_or(false) { format!("{c:>w$}") } else { format!("{c:<w$}") }
+            })
             .collect();
         println!("{}", parts.join("  ").trim_end());
     };

@@ -33,6 +33,9 @@ pub enum EvalError {
 pub struct AnchorStep {
     pub sessions: usize,
     pub mode: String,
+    /// Mean over the sessions of the odometry's rigid residual (a session
+    /// moved as one rigid body), m: the same for every mode.
+    pub mean_rigid_session_residual_m: f64,
     /// Mean over the sessions of the per-session rigid residual, m.
     pub mean_rigid_residual_m: f64,
     /// Largest per-session ATE RMSE, m.
@@ -46,6 +49,9 @@ pub struct AlignReport {
     pub names: Vec<String>,
     /// The newest graph version against the truth.
     pub sessions: Vec<align::SessionAlignment>,
+    /// Per session, the rigid residual of its raw odometry: what remains
+    /// when a session can only move as one rigid body (its shape frozen).
+    pub odometry_residual_m: Vec<f64>,
     /// Accepted loops measured against the true relative poses.
     pub loops: LoopAccuracy,
     /// Filled by `compare_anchors`.
@@ -162,9 +168,15 @@ pub fn align_report(
         return Err(EvalError::Mismatch("the store has no complete session to evaluate".into()));
     }
     let (est, tru) = pairs(&sessions, &graph::current(&sessions), &truth)?;
+    let odometry: graph::WorldPoses =
+        sessions.iter().map(|s| s.keyframes.iter().map(|k| k.row.t_session_keyframe).collect()).collect();
+    let (odo, odo_true) = pairs(&sessions, &odometry, &truth)?;
+    let odometry_residual_m: Vec<f64> =
+        odo.iter().zip(&odo_true).map(|(e, t)| align::rmse_after(&align::umeyama(e, t), e, t).0).collect();
     let mut report = AlignReport {
         names: sessions.iter().map(|s| s.row.name.clone()).collect(),
         sessions: align::evaluate(&est, &tru),
+        odometry_residual_m: odometry_residual_m.clone(),
         loops: loop_accuracy(&sessions, &truth, &store::loops(store.conn(), true)?),
         anchor_steps: Vec::new(),
     };
@@ -185,6 +197,7 @@ pub fn align_report(
                 report.anchor_steps.push(AnchorStep {
                     sessions: k,
                     mode: mode.name().into(),
+                    mean_rigid_session_residual_m: odometry_residual_m[..k].iter().sum::<f64>() / k as f64,
                     mean_rigid_residual_m: per_session.iter().map(|s| s.rigid_residual_m).sum::<f64>()
                         / per_session.len() as f64,
                     max_ate_rmse_m: per_session.iter().map(|s| s.ate_rmse_m).fold(0.0, f64::max),
