@@ -31,9 +31,12 @@ pub fn umeyama(src: &[Vector3<f64>], dst: &[Vector3<f64>]) -> Pose {
     let (Some(u), Some(vt)) = (svd.u, svd.v_t) else {
         return Pose::from_parts(Translation3::from(md - ms), UnitQuaternion::identity());
     };
+    // A reflection is turned into a rotation by flipping the direction of
+    // the smallest singular value (nalgebra does not sort them).
     let mut s = Matrix3::identity();
     if (u * vt).determinant() < 0.0 {
-        s[(2, 2)] = -1.0;
+        let smallest = svd.singular_values.imin();
+        s[(smallest, smallest)] = -1.0;
     }
     let r = u * s * vt;
     let rot = UnitQuaternion::from_matrix(&r);

@@ -63,13 +63,8 @@ pub struct LoopConfig {
     pub max_fitness_m2: f64,
     /// GICP for loops.
     pub gicp: GicpConfig,
-    /// The DOP ratio test (MATH.md §4). κ stays 2.0. `rho_max` is 6.0, not
-    /// `DopConfig`'s 3.0: ρ ≈ 1 assumes returns from the whole FoV, but
-    /// outdoors the sky returns nothing. Simulated scans have ρ_scan
-    /// 1.3-2.7 (OS1-64, VLP-16) and 1.8-5.2 (Avia). Correct matches in the
-    /// Table I analogue had ρ_corr up to 3.02 (OS1-64) and 5.32 (Avia), so
-    /// 3.0 rejected 90-100 % of correct Avia matches, ratio ~1.0. 6.0 is
-    /// about 1.13 × the largest correct ρ_corr.
+    /// The DOP ratio test (MATH.md §4; see `DopConfig::rho_max` for why its
+    /// default is 6.0, not MATH.md's 3.0).
     pub dop: DopConfig,
 }
 
@@ -84,7 +79,7 @@ impl Default for LoopConfig {
             min_inlier_ratio: 0.7,
             max_fitness_m2: 0.06,
             gicp: GicpConfig::default(),
-            dop: DopConfig { rho_max: 6.0, ..DopConfig::default() },
+            dop: DopConfig::default(),
         }
     }
 }
