@@ -7,6 +7,7 @@
 //! halves the memory of a multi-million point session.
 
 mod pose;
+pub mod se3;
 mod voxel;
 
 pub use pose::{

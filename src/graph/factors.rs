@@ -1,9 +1,9 @@
 //! Residuals and analytic Jacobians of the anchored between factor (eq. 2-3)
 //! and of the anchor prior (MATH.md §5).
 
-use super::lie::{adjoint, se3_right_jacobian_inv};
 use crate::geometry::Pose;
-use crate::registration::se3::se3_log;
+use crate::geometry::se3::se3_log;
+use crate::geometry::se3::{adjoint, se3_right_jacobian_inv};
 use nalgebra::{Matrix6, Vector6};
 
 /// `∂r/∂` each of the four variables of an anchored between factor.
@@ -49,7 +49,7 @@ pub fn prior_residual_and_jacobian(z: &Pose, x: &Pose) -> (Vector6<f64>, Matrix6
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::registration::se3::se3_exp;
+    use crate::geometry::se3::se3_exp;
     use proptest::prelude::*;
 
     fn pose(a: [f64; 6]) -> Pose {

@@ -24,11 +24,10 @@
 //! poses (store).
 
 mod factors;
-mod lie;
 mod solver;
 
+pub use crate::geometry::se3::{adjoint, se3_right_jacobian_inv};
 pub use factors::{BetweenJacobians, between_residual_and_jacobians};
-pub use lie::{adjoint, se3_right_jacobian_inv};
 pub use solver::{OptimizeReport, SolveError, optimize};
 
 use crate::geometry::Pose;

@@ -3,7 +3,7 @@
 
 use super::factors::{between_residual_and_jacobians, prior_residual_and_jacobian};
 use super::{GraphConfig, PoseGraph};
-use crate::registration::se3::se3_exp;
+use crate::geometry::se3::se3_exp;
 use faer::linalg::solvers::Solve;
 use faer::sparse::{SparseColMat, Triplet};
 use faer::{Mat, Side};

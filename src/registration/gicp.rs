@@ -26,8 +26,8 @@
 use super::covariance::estimate_covariances;
 use super::downsample::{Point3Like, voxel_downsample};
 use super::kdtree::{KdTree, to_f32};
-use super::se3::se3_exp;
 use crate::geometry::Pose;
+use crate::geometry::se3::se3_exp;
 use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};

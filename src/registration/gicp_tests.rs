@@ -3,8 +3,8 @@
 //! `tests/registration_real.rs`.
 
 use super::*;
-use crate::registration::se3::hat;
-use crate::registration::se3::se3_log;
+use crate::geometry::se3::hat;
+use crate::geometry::se3::se3_log;
 use nalgebra::Matrix3x6;
 use rand::{Rng, SeedableRng};
 

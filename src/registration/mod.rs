@@ -21,7 +21,6 @@
 //! ```
 //!
 //! # Layout
-//! - `se3`: `hat`, `Exp`/`Log`, SO(3) Jacobians (`[ω; v]`, right perturbation).
 //! - `downsample`: voxel-grid centroids.
 //! - `kdtree`: kiddo `ImmutableKdTree` wrapper plus the brute-force reference.
 //! - `covariance`: k-NN covariances regularised to planes.
@@ -37,7 +36,6 @@ pub mod gicp;
 pub mod global;
 pub mod kdtree;
 pub mod loop_check;
-pub mod se3;
 
 pub use dop::{DopConfig, DopReason, DopVerdict, RhoReport, estimate_fov, g0, reliability_test, rho, solid_angle_sr};
 pub use gicp::{GicpConfig, GicpResult, GicpTarget, PreparedCloud, align, preprocess};

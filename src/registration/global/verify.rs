@@ -27,7 +27,7 @@ use rayon::prelude::*;
 use super::cloud::MapCloud;
 use super::robust::Dof;
 use crate::geometry::Pose;
-use crate::registration::se3::se3_exp;
+use crate::geometry::se3::se3_exp;
 
 /// A normal with `|n_z|` below this (rotated into the target frame) marks a
 /// structure point: more than ~45° from vertical.
