@@ -73,10 +73,14 @@ pub fn run(ctx: &Ctx, a: DemoArgs) -> anyhow::Result<()> {
             &serde_json::json!({ "store": store_path, "sessions": sessions, "receipts": receipts, "wall_s": t0.elapsed().as_secs_f64() }),
         );
     }
+    // How close the aligned poses are to the simulator's truth.
+    let eval = crate::eval::align_report(&store, &a.out.join("sessions"), false, &ctx.config.graph)?;
     let rows: Vec<Vec<String>> = sessions
         .iter()
         .zip(&sim.sessions)
         .map(|(s, g)| {
+            let method = store::alignment(store.conn(), s.session_id).ok().flatten().map(|a| a.method);
+            let ate = eval.sessions.iter().find(|e| e.session as i64 == s.session_id.0);
             vec![
                 s.session_id.0.to_string(),
                 s.name.clone(),
@@ -85,11 +89,20 @@ pub fn run(ctx: &Ctx, a: DemoArgs) -> anyhow::Result<()> {
                 thousands(s.point_count as u64),
                 format!("{:.0}", g.true_path_length_m),
                 format!("{:.2}", g.final_drift_m),
+                method.unwrap_or_default(),
+                ate.map(|e| format!("{:.3}", e.ate_rmse_m)).unwrap_or_default(),
             ]
         })
         .collect();
-    print_table(&["session", "name", "date", "keyframes", "points", "path_m", "odometry_drift_m"], &rows);
-    println!("store: {}  (try `seam sessions {0}`, `seam info {0}`, `seam check {0}`)", store_path.display());
+    print_table(
+        &["session", "name", "date", "keyframes", "points", "path_m", "odometry_drift_m", "alignment", "ate_m"],
+        &rows,
+    );
+    println!(
+        "store: {}  (try `seam info {0}`, `seam poses {0}`, `seam eval align {0} --gt {}`)",
+        store_path.display(),
+        a.out.join("sessions").display()
+    );
     log(ctx, format!("demo finished in {:.1} s", t0.elapsed().as_secs_f64()));
     Ok(())
 }
