@@ -7,6 +7,17 @@
 //! ```toml
 //! [submap]
 //! submap_length_m = 30.0
+//!
+//! [loops]              # registration::LoopConfig
+//! radius_m = 15.0
+//! [loops.dop]          # registration::DopConfig
+//! rho_max = 4.0
+//!
+//! [graph]              # graph::GraphConfig
+//! mode = "session"
+//!
+//! [global]             # registration::global::GlobalConfig
+//! voxel_size_m = 0.75
 //! ```
 
 use serde::{Deserialize, Serialize};
@@ -94,6 +105,32 @@ impl Config {
         if self.ingest.read_batch_scans == 0 {
             return bad("ingest.read_batch_scans must be at least 1".into());
         }
+        let positive = |name: &str, v: f64| -> Result<(), ConfigError> {
+            if v > 0.0 && v.is_finite() { Ok(()) } else { bad(format!("{name} = {v} must be positive")) }
+        };
+        let g = &self.graph;
+        positive("graph.odom_sigma_rot_rad", g.odom_sigma_rot_rad)?;
+        positive("graph.odom_sigma_trans_m", g.odom_sigma_trans_m)?;
+        positive("graph.loop_sigma_rot_rad", g.loop_sigma_rot_rad)?;
+        positive("graph.loop_sigma_trans_m", g.loop_sigma_trans_m)?;
+        positive("graph.loop_cauchy_k", g.loop_cauchy_k)?;
+        positive("graph.anchor_prior_sigma_rot_rad", g.anchor_prior_sigma_rot_rad)?;
+        positive("graph.anchor_prior_sigma_trans_m", g.anchor_prior_sigma_trans_m)?;
+        positive("graph.submap_boundary_sigma_scale", g.submap_boundary_sigma_scale)?;
+        let l = &self.loops;
+        positive("loops.radius_m", l.radius_m)?;
+        positive("loops.gicp.voxel_size_m", l.gicp.voxel_size_m)?;
+        positive("loops.dop.voxel_size_m", l.dop.voxel_size_m)?;
+        positive("coarse.map_voxel_m", self.coarse.map_voxel_m)?;
+        if !(0.0..=1.0).contains(&l.min_inlier_ratio) {
+            return bad(format!("loops.min_inlier_ratio = {} must be within [0, 1]", l.min_inlier_ratio));
+        }
+        if l.keyframe_stride == 0 || l.max_sessions_per_keyframe == 0 || self.coarse.map_keyframe_stride == 0 {
+            return bad("loops.keyframe_stride, loops.max_sessions_per_keyframe and coarse.map_keyframe_stride must be at least 1".into());
+        }
+        self.global
+            .validate()
+            .map_err(|m| ConfigError::Invalid { path: path.into(), message: format!("global: {m}") })?;
         Ok(())
     }
 }
@@ -117,5 +154,21 @@ mod tests {
         assert!(e.to_string().contains("submap_lenght_m"), "{e}");
         let e = Config::from_toml("[submap]\nsubmap_length_m = -1.0\n", Path::new("c.toml")).unwrap_err();
         assert!(e.to_string().contains("positive"), "{e}");
+        let e = Config::from_toml("[graph]\nloop_sigma_trans_m = 0.0\n", Path::new("c.toml")).unwrap_err();
+        assert!(e.to_string().contains("graph.loop_sigma_trans_m"), "{e}");
+        let e = Config::from_toml("[loops.dop]\nrho_mx = 4.0\n", Path::new("c.toml")).unwrap_err();
+        assert!(e.to_string().contains("rho_mx"), "{e}");
+    }
+
+    /// The nested sections of the module doc parse and land where they say.
+    #[test]
+    fn alignment_sections_override_their_stages() {
+        let text = "[loops]\nradius_m = 15.0\n[loops.dop]\nrho_max = 4.0\n[graph]\nmode = \"session\"\n[global]\nvoxel_size_m = 0.75\n";
+        let c = Config::from_toml(text, Path::new("c.toml")).unwrap();
+        assert_eq!(c.loops.radius_m, 15.0);
+        assert_eq!(c.loops.dop.rho_max, 4.0);
+        assert_eq!(c.loops.dop.kappa, crate::registration::DopConfig::default().kappa);
+        assert_eq!(c.graph.mode, crate::graph::AnchorMode::Session);
+        assert_eq!(c.global.voxel_size_m, 0.75);
     }
 }
