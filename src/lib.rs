@@ -2,11 +2,12 @@
 //!
 //! A survey script pushes each new session (a walk or drive with a LiDAR
 //! through a site) into a store; seam validates it, stores every scan and its
-//! odometry pose, cuts the trajectory into submaps, and records each step as
-//! its own transaction. The SEAM paper's later steps — coarse alignment,
-//! inter-session loops accepted by a DOP test, a joint pose graph with submap
-//! anchors, directional ray-casting evidence, dynamic object removal and
-//! change detection — plug into the same step framework (`pipeline`).
+//! odometry pose, cuts the trajectory into submaps, aligns it with every
+//! earlier session (coarse map-to-map registration, intra- and inter-session
+//! loops accepted by the DOP test, a joint pose graph with submap anchors),
+//! and records each step as its own transaction. Directional ray-casting
+//! evidence (`evidence`, built, not yet in the pipeline), dynamic object
+//! removal and change detection plug into the same step framework.
 //!
 //! # Layout
 //! - [`geometry`]: SE(3) poses, scans, voxel keys. No I/O.
@@ -14,6 +15,12 @@
 //! - [`io`]: readers for KITTI `.bin`, PCD, PLY, LAS/LAZ, pose files, and the
 //!   session layouts; validation with errors that name file and place.
 //! - [`pipeline`]: `ingest_session`, one page of named steps.
+//! - [`align`]: multi-session alignment over the store's rows: maps, coarse
+//!   placement, loop candidates, the joint graph per anchor mode.
+//! - [`registration`]: GICP, the DOP test, loop verification, global registration.
+//! - [`graph`]: the pose graph with submap anchors (LM on sparse Cholesky).
+//! - [`evidence`]: voxel ray casting and directional hit/free evidence, ε_l.
+//! - [`eval`]: metrics against ground truth (Umeyama, ATE, rigid residual).
 //! - [`store`]: the only module that touches SQLite and Parquet.
 //! - [`sim`]: a simulated multi-session construction site with ground truth.
 //! - [`config`]: one `Config`, a sub-struct per stage.
@@ -39,6 +46,7 @@ pub mod align;
 pub mod cli;
 pub mod config;
 pub mod eval;
+pub mod evidence;
 pub mod fault;
 pub mod geometry;
 pub mod graph;

@@ -1,0 +1,42 @@
+//! Directional ray-casting evidence (MATH.md §6, eqs. 4-8).
+//!
+//! ```text
+//!  keyframe: sensor origin + points        (one submap's frame)
+//!        │  raycast: Amanatides-Woo walk; endpoint voxel = hit,
+//!        │           voxels up to two before it = free
+//!        ▼
+//!  per-keyframe marks {voxel → hit/free}   (each voxel once per keyframe and kind)
+//!        │  accumulate: q = exp(-max(0, r - r0)/rs), u = sensor → voxel centre   (4)
+//!        ▼
+//!  EvidenceMap {voxel → (n, Q, M = Σ q u uᵀ) for hit and for free, owner keyframe}
+//!        │  stats: α = λ1/λ2 of M, ω (5), h and f (6), s (7)
+//!        ▼
+//!  ε_l = s·f / (h + f + c), clamped to [0.1, 1]                                   (8)
+//! ```
+//!
+//! This module owns that path, from rays to a voxel's ε_l, as plain data in
+//! and out. It does not own storing evidence (that is `store`), labelling each
+//! point dynamic or static for DOR, reprojecting evidence after the graph is
+//! re-optimised (MATH.md §7), nor the ELite update that consumes ε_l (§8):
+//! those come later in issue 4 and build on [`EvidenceMap`] and
+//! [`VoxelEvidence::epsilon_l`].
+//!
+//! Why hand-written: no crate keeps direction-aware evidence per voxel (the
+//! occupancy crates count hits and misses, not the directions they came
+//! from), and the Amanatides-Woo traversal is about sixty lines that are
+//! easier to test here against a dense sampling than to adapt.
+//!
+//! # Layout
+//! - `raycast.rs`: [`traverse`] and the free/hit rule [`cast_ray`]
+//! - `stats.rs`: [`EvidenceConfig`], [`DirectionalStats`], [`VoxelEvidence`],
+//!   closed-form 3×3 eigenvalues [`sym3_eigenvalues`]
+//! - `accumulate.rs`: [`accumulate_keyframe`] and its parallel twin
+//!   [`accumulate_keyframe_par`] into an [`EvidenceMap`]
+
+mod accumulate;
+mod raycast;
+mod stats;
+
+pub use accumulate::{EvidenceMap, KeyframeEvidence, accumulate_keyframe, accumulate_keyframe_par};
+pub use raycast::{cast_ray, traverse, voxel_key};
+pub use stats::{DirectionalStats, EvidenceConfig, VoxelEvidence, sym3_eigenvalues};

@@ -1,0 +1,405 @@
+//! Per-voxel directional evidence and the local ephemerality ε_l
+//! (MATH.md §6, eqs. 4-8).
+//!
+//! A voxel keeps hit and free evidence apart, each as the number of observing
+//! keyframes `n`, the weight `Q = Σ q` and the direction matrix
+//! `M = Σ q u uᵀ` (six numbers, upper triangle). The eigenvalues of `M` say
+//! how many distinct directions the voxel was seen from: one direction gives
+//! `M ≈ Q u uᵀ` (rank 1, α ≈ 0), many give a spread spectrum (α near 1).
+
+use serde::{Deserialize, Serialize};
+
+/// The evidence stage's parameters (MATH.md §6; every default is a choice
+/// there, not a measured value).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct EvidenceConfig {
+    /// Edge of the evidence voxels.
+    pub voxel_size_m: f64,
+    /// Range up to which a keyframe's weight q is 1 (eq. 4).
+    pub r0_m: f64,
+    /// Range scale of q's decay past `r0_m` (eq. 4).
+    pub rs_m: f64,
+    /// α at which the direction factor of ω saturates (eq. 5).
+    pub alpha0: f64,
+    /// Weight Q at which the count factor of ω saturates (eq. 5).
+    pub n0: f64,
+    /// Observing keyframes at which the support s saturates (eq. 7).
+    pub n_sat: u32,
+    /// A voxel is dynamic when its clamped ε_l exceeds this.
+    pub tau_dyn: f64,
+    /// Lower clamp of ε_l before the Bayes update (0 would be absorbing).
+    pub eps_min: f64,
+    /// Upper clamp of ε_l before the Bayes update (1 would be absorbing).
+    pub eps_max: f64,
+    /// Pseudo-count c in `ε_l = s·f / (h + f + c)` (eq. 8 regularised).
+    /// 0 is the paper's formula. MATH.md §6 warns that with c = 0 a surface
+    /// hit from one direction (ω_hit = 0) is removed by any free evidence at
+    /// all; the value of c is to be measured on real data (PR of DOR), and
+    /// this default changed only with the numbers that justify it.
+    pub pseudo_count: f64,
+}
+
+impl Default for EvidenceConfig {
+    fn default() -> Self {
+        EvidenceConfig {
+            voxel_size_m: 0.2,
+            r0_m: 20.0,
+            rs_m: 30.0,
+            alpha0: 0.2,
+            n0: 3.0,
+            n_sat: 5,
+            tau_dyn: 0.5,
+            eps_min: 0.1,
+            eps_max: 1.0,
+            pseudo_count: 0.0,
+        }
+    }
+}
+
+impl EvidenceConfig {
+    /// Checks the values a TOML file may have set; the message names the key.
+    pub fn validate(&self) -> Result<(), String> {
+        for (name, v) in
+            [("voxel_size_m", self.voxel_size_m), ("rs_m", self.rs_m), ("alpha0", self.alpha0), ("n0", self.n0)]
+        {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(format!("evidence.{name} is {v}; it must be a positive number"));
+            }
+        }
+        for (name, v) in [("r0_m", self.r0_m), ("pseudo_count", self.pseudo_count)] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(format!("evidence.{name} is {v}; it must be zero or a positive number"));
+            }
+        }
+        if self.n_sat == 0 {
+            return Err("evidence.n_sat is 0; it must be at least 1 (default 5)".into());
+        }
+        if !(0.0 <= self.eps_min && self.eps_min <= self.eps_max && self.eps_max <= 1.0) {
+            return Err(format!(
+                "evidence.eps_min ({}) and eps_max ({}) must satisfy 0 ≤ eps_min ≤ eps_max ≤ 1 (defaults 0.1 and 1)",
+                self.eps_min, self.eps_max
+            ));
+        }
+        if !(0.0..=1.0).contains(&self.tau_dyn) {
+            return Err(format!("evidence.tau_dyn is {}; it must lie in [0, 1] (default 0.5)", self.tau_dyn));
+        }
+        Ok(())
+    }
+
+    /// Eq. 4: the weight of one keyframe's observation at range `r_m`.
+    pub fn range_weight(&self, r_m: f64) -> f64 {
+        (-(r_m - self.r0_m).max(0.0) / self.rs_m).exp()
+    }
+}
+
+/// One kind of evidence (hit or free) of one voxel.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct DirectionalStats {
+    /// Observing keyframes (each counted at most once).
+    pub n: u32,
+    /// `Q = Σ q` over those keyframes.
+    pub q_sum: f64,
+    /// `M = Σ q u uᵀ`, upper triangle `[xx, xy, xz, yy, yz, zz]`.
+    pub m: [f64; 6],
+}
+
+impl DirectionalStats {
+    /// Adds one keyframe's observation with weight `q` along the unit
+    /// direction `u` (sensor → voxel centre). A zero `u` adds to n and Q only.
+    pub fn add(&mut self, q: f64, u: &[f64; 3]) {
+        self.n += 1;
+        self.q_sum += q;
+        let [x, y, z] = *u;
+        for (m, p) in self.m.iter_mut().zip([x * x, x * y, x * z, y * y, y * z, z * z]) {
+            *m += q * p;
+        }
+    }
+
+    /// Sums two accumulations (e.g. when re-binning voxels, MATH.md §7).
+    pub fn merge(&mut self, other: &DirectionalStats) {
+        self.n += other.n;
+        self.q_sum += other.q_sum;
+        for (m, o) in self.m.iter_mut().zip(other.m) {
+            *m += o;
+        }
+    }
+
+    /// `α = λ1 / λ2` of M (0 when λ2 = 0), in [0, 1]: near 0 when every
+    /// observation shares one direction (MATH.md §6's choice over λ2/λ1).
+    pub fn alpha(&self) -> f64 {
+        let [_, l1, l2] = sym3_eigenvalues(&self.m);
+        if l2 > 0.0 { (l1 / l2).clamp(0.0, 1.0) } else { 0.0 }
+    }
+
+    /// Eq. 5: `ω = clip(α/α0, 0, 1) · min(1, Q/n0)`.
+    pub fn omega(&self, cfg: &EvidenceConfig) -> f64 {
+        (self.alpha() / cfg.alpha0).clamp(0.0, 1.0) * (self.q_sum / cfg.n0).min(1.0)
+    }
+}
+
+/// Everything one voxel has gathered, from the keyframes of one submap.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct VoxelEvidence {
+    pub hit: DirectionalStats,
+    pub free: DirectionalStats,
+    /// The owner keyframe: the one whose contribution to `Q_hit + Q_free` is
+    /// largest (MATH.md §7 moves the voxel with this keyframe's pose).
+    /// Ties go to the lower index, so the owner does not depend on the order
+    /// keyframes are accumulated in.
+    pub owner_keyframe: u32,
+    /// That keyframe's contribution: q, or 2q when it both hit and freed the
+    /// voxel. Exact, not an approximation, because each keyframe adds to a
+    /// voxel in one go (a keyframe's q is the same for both kinds); 0 only
+    /// before any keyframe was added.
+    pub owner_q: f64,
+}
+
+impl VoxelEvidence {
+    /// Records keyframe `keyframe`'s contribution `q_total` to this voxel's Q,
+    /// keeping the largest as the owner.
+    pub fn offer_owner(&mut self, keyframe: u32, q_total: f64) {
+        if q_total > self.owner_q || (q_total == self.owner_q && keyframe < self.owner_keyframe) {
+            self.owner_keyframe = keyframe;
+            self.owner_q = q_total;
+        }
+    }
+
+    /// Eq. 6: `(h, f) = (n_hit ω_hit, n_free ω_free)`.
+    pub fn hit_free_scores(&self, cfg: &EvidenceConfig) -> (f64, f64) {
+        (self.hit.n as f64 * self.hit.omega(cfg), self.free.n as f64 * self.free.omega(cfg))
+    }
+
+    /// Eq. 7: `s = min(n_hit + n_free, n_sat) / n_sat`.
+    pub fn support(&self, cfg: &EvidenceConfig) -> f64 {
+        (self.hit.n.saturating_add(self.free.n).min(cfg.n_sat)) as f64 / cfg.n_sat as f64
+    }
+
+    /// Eq. 8, unclamped: `ε_l = s·f / (h + f + c)`, 0 when the denominator
+    /// is 0. In [0, 1].
+    pub fn epsilon_l_raw(&self, cfg: &EvidenceConfig) -> f64 {
+        let (h, f) = self.hit_free_scores(cfg);
+        let den = h + f + cfg.pseudo_count;
+        if den > 0.0 { self.support(cfg) * f / den } else { 0.0 }
+    }
+
+    /// ε_l clamped to `[eps_min, eps_max]`, as it enters change detection.
+    pub fn epsilon_l(&self, cfg: &EvidenceConfig) -> f64 {
+        self.epsilon_l_raw(cfg).clamp(cfg.eps_min, cfg.eps_max)
+    }
+
+    /// Whether DOR removes this voxel's points: clamped ε_l > τ_dyn.
+    pub fn is_dynamic(&self, cfg: &EvidenceConfig) -> bool {
+        self.epsilon_l(cfg) > cfg.tau_dyn
+    }
+}
+
+/// Eigenvalues `[λ0, λ1, λ2]` (ascending) of the symmetric 3×3 matrix with
+/// upper triangle `[a00, a01, a02, a11, a12, a22]`, in closed form
+/// (trigonometric method, Smith 1961). Accurate to about `1e-8·‖A‖` near
+/// repeated eigenvalues (acos is ill-conditioned at ±1), far better
+/// elsewhere: ample for α.
+pub fn sym3_eigenvalues(m: &[f64; 6]) -> [f64; 3] {
+    let [a00, a01, a02, a11, a12, a22] = *m;
+    let off = a01 * a01 + a02 * a02 + a12 * a12;
+    if off == 0.0 {
+        let mut d = [a00, a11, a22];
+        d.sort_by(f64::total_cmp);
+        return d;
+    }
+    let q = (a00 + a11 + a22) / 3.0;
+    let (b00, b11, b22) = (a00 - q, a11 - q, a22 - q);
+    let p = ((b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * off) / 6.0).sqrt();
+    if p == 0.0 || !p.is_finite() {
+        return [q; 3];
+    }
+    // det(B) / 2 with B = (A - qI) / p; clamped because rounding can step
+    // outside acos's domain.
+    let det = b00 * (b11 * b22 - a12 * a12) - a01 * (a01 * b22 - a12 * a02) + a02 * (a01 * a12 - b11 * a02);
+    let r = (det / (2.0 * p * p * p)).clamp(-1.0, 1.0);
+    let phi = r.acos() / 3.0;
+    let l2 = q + 2.0 * p * phi.cos();
+    let l0 = q + 2.0 * p * (phi + 2.0 * std::f64::consts::FRAC_PI_3).cos();
+    let l1 = 3.0 * q - l2 - l0;
+    // l0 ≤ l1 ≤ l2 holds mathematically; rounding may swap near-equal ones.
+    let mut l = [l0, l1, l2];
+    l.sort_by(f64::total_cmp);
+    l
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{Matrix3, SymmetricEigen, Vector3};
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    fn reference(m: &[f64; 6]) -> [f64; 3] {
+        let a = Matrix3::new(m[0], m[1], m[2], m[1], m[3], m[4], m[2], m[4], m[5]);
+        let mut e: Vec<f64> = SymmetricEigen::new(a).eigenvalues.iter().copied().collect();
+        e.sort_by(f64::total_cmp);
+        [e[0], e[1], e[2]]
+    }
+
+    fn assert_eig(m: &[f64; 6]) {
+        let (got, want) = (sym3_eigenvalues(m), reference(m));
+        let scale = m.iter().fold(1e-300f64, |s, v| s.max(v.abs()));
+        for i in 0..3 {
+            assert!((got[i] - want[i]).abs() <= 1e-7 * scale, "{m:?}: {got:?} vs {want:?}");
+        }
+    }
+
+    /// `R diag(l) Rᵀ` for a random rotation R, as an upper triangle.
+    fn with_spectrum(rng: &mut ChaCha8Rng, l: [f64; 3]) -> [f64; 6] {
+        let axis = Vector3::new(rng.random::<f64>() - 0.5, rng.random::<f64>() - 0.5, rng.random::<f64>() - 0.5);
+        let r = nalgebra::Rotation3::new(axis * 6.0).into_inner();
+        let a = r * Matrix3::from_diagonal(&Vector3::from(l)) * r.transpose();
+        [a[(0, 0)], a[(0, 1)], a[(0, 2)], a[(1, 1)], a[(1, 2)], a[(2, 2)]]
+    }
+
+    #[test]
+    fn eigenvalues_match_nalgebra() {
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        for _ in 0..2000 {
+            let m: [f64; 6] = std::array::from_fn(|_| rng.random::<f64>() * 20.0 - 10.0);
+            assert_eig(&m);
+        }
+        // Degenerate spectra: repeated, zero, rank 1 and 2, tiny and huge.
+        for l in [
+            [1.0, 1.0, 1.0],
+            [0.0, 0.0, 0.0],
+            [0.0, 0.0, 5.0],
+            [0.0, 3.0, 3.0],
+            [2.0, 2.0, 7.0],
+            [1.0, 1.0 + 1e-9, 1.0 + 2e-9],
+            [-4.0, 0.0, 4.0],
+            [1e-12, 1e-12, 1.0],
+            [1e6, 1e6, 1e6 + 1.0],
+        ] {
+            for _ in 0..50 {
+                assert_eig(&with_spectrum(&mut rng, l));
+            }
+        }
+        assert_eig(&[3.0, 0.0, 0.0, 1.0, 0.0, 2.0]);
+        assert_eq!(sym3_eigenvalues(&[3.0, 0.0, 0.0, 1.0, 0.0, 2.0]), [1.0, 2.0, 3.0]);
+    }
+
+    fn unit(v: [f64; 3]) -> [f64; 3] {
+        let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+        [v[0] / n, v[1] / n, v[2] / n]
+    }
+
+    #[test]
+    fn alpha_is_near_one_from_many_directions_and_zero_from_one() {
+        let mut many = DirectionalStats::default();
+        let mut rng = ChaCha8Rng::seed_from_u64(1);
+        for _ in 0..500 {
+            let u = unit([rng.random::<f64>() - 0.5, rng.random::<f64>() - 0.5, rng.random::<f64>() - 0.5]);
+            many.add(1.0, &u);
+        }
+        assert!(many.alpha() > 0.8, "α = {}", many.alpha());
+
+        let mut one = DirectionalStats::default();
+        for q in [1.0, 0.7, 0.3, 0.9] {
+            one.add(q, &unit([1.0, 2.0, -0.5]));
+        }
+        assert!(one.alpha() < 1e-6, "α = {}", one.alpha());
+        assert_eq!(DirectionalStats::default().alpha(), 0.0);
+        // Two orthogonal directions: λ1 = λ2.
+        let mut two = DirectionalStats::default();
+        two.add(1.0, &[1.0, 0.0, 0.0]);
+        two.add(1.0, &[0.0, 1.0, 0.0]);
+        assert!((two.alpha() - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn range_weight_follows_eq_4() {
+        let cfg = EvidenceConfig::default();
+        assert_eq!(cfg.range_weight(0.0), 1.0);
+        assert_eq!(cfg.range_weight(20.0), 1.0);
+        assert!((cfg.range_weight(50.0) - (-1.0f64).exp()).abs() < 1e-15);
+    }
+
+    /// A voxel seen `n` times (q = 1) from the directions `dirs` in turn.
+    fn stats(n: u32, dirs: &[[f64; 3]]) -> DirectionalStats {
+        let mut s = DirectionalStats::default();
+        for i in 0..n as usize {
+            s.add(1.0, &unit(dirs[i % dirs.len()]));
+        }
+        s
+    }
+
+    const SPREAD: [[f64; 3]; 3] = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+
+    #[test]
+    fn epsilon_l_follows_eqs_6_to_8() {
+        let cfg = EvidenceConfig::default();
+        // No free evidence: ε_l = 0 (clamped to 0.1), static.
+        let hit_only = VoxelEvidence { hit: stats(6, &SPREAD), ..Default::default() };
+        assert_eq!(hit_only.epsilon_l_raw(&cfg), 0.0);
+        assert_eq!(hit_only.epsilon_l(&cfg), 0.1);
+        assert!(!hit_only.is_dynamic(&cfg));
+        // Only free evidence: ε_l = s once f > 0 (one keyframe alone has
+        // α = 0, so f = 0 and ε_l = 0).
+        let single = VoxelEvidence { free: stats(1, &SPREAD), ..Default::default() };
+        assert_eq!(single.epsilon_l_raw(&cfg), 0.0);
+        for n in 2..8 {
+            let free_only = VoxelEvidence { free: stats(n, &SPREAD), ..Default::default() };
+            let s = n.min(5) as f64 / 5.0;
+            assert!((free_only.epsilon_l_raw(&cfg) - s).abs() < 1e-12, "n = {n}");
+            assert_eq!(free_only.support(&cfg), s);
+        }
+        // Nothing at all: 0, clamped up.
+        assert_eq!(VoxelEvidence::default().epsilon_l_raw(&cfg), 0.0);
+        assert_eq!(VoxelEvidence::default().epsilon_l(&cfg), 0.1);
+        // Balanced, well spread: h = f, s = 1 → 0.5, not dynamic (strict >).
+        let both = VoxelEvidence { hit: stats(3, &SPREAD), free: stats(3, &SPREAD), ..Default::default() };
+        assert!((both.epsilon_l_raw(&cfg) - 0.5).abs() < 1e-12);
+        assert!(!both.is_dynamic(&cfg));
+        // The warned case: a surface hit from one direction is removed by
+        // free evidence; the pseudo-count softens it.
+        let one_sided =
+            VoxelEvidence { hit: stats(5, &[[1.0, 0.0, 0.0]]), free: stats(3, &SPREAD), ..Default::default() };
+        assert!((one_sided.epsilon_l_raw(&cfg) - 1.0).abs() < 1e-12);
+        assert!(one_sided.is_dynamic(&cfg));
+        let soft = EvidenceConfig { pseudo_count: 3.0, ..cfg.clone() };
+        assert!((one_sided.epsilon_l_raw(&soft) - 0.5).abs() < 1e-12);
+        // Clamping to the configured bounds.
+        let tight = EvidenceConfig { eps_min: 0.2, eps_max: 0.9, ..cfg.clone() };
+        assert_eq!(one_sided.epsilon_l(&tight), 0.9);
+        assert_eq!(hit_only.epsilon_l(&tight), 0.2);
+    }
+
+    #[test]
+    fn omega_saturates_in_alpha_and_weight() {
+        let cfg = EvidenceConfig::default();
+        assert!((stats(3, &SPREAD).omega(&cfg) - 1.0).abs() < 1e-12);
+        assert!((stats(1, &SPREAD).omega(&cfg) - 0.0).abs() < 1e-12, "one direction");
+        // Two orthogonal directions at q = 1: α = 1, Q = 2 → 2/3.
+        assert!((stats(2, &SPREAD).omega(&cfg) - 2.0 / 3.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn owner_is_the_largest_contribution_with_ties_to_the_lower_index() {
+        let mut v = VoxelEvidence::default();
+        v.offer_owner(5, 0.5);
+        v.offer_owner(3, 0.4);
+        assert_eq!((v.owner_keyframe, v.owner_q), (5, 0.5));
+        v.offer_owner(9, 1.0);
+        v.offer_owner(2, 1.0);
+        v.offer_owner(4, 1.0);
+        assert_eq!((v.owner_keyframe, v.owner_q), (2, 1.0));
+    }
+
+    #[test]
+    fn config_defaults_validate_and_unknown_keys_fail() {
+        let cfg = EvidenceConfig::default();
+        assert!(cfg.validate().is_ok());
+        let parsed: EvidenceConfig = toml::from_str("r0_m = 10.0").unwrap();
+        assert_eq!(parsed, EvidenceConfig { r0_m: 10.0, ..cfg.clone() });
+        assert!(toml::from_str::<EvidenceConfig>("r0 = 10.0").is_err());
+        assert!(EvidenceConfig { n_sat: 0, ..cfg.clone() }.validate().unwrap_err().contains("n_sat"));
+        assert!(EvidenceConfig { eps_min: 0.6, eps_max: 0.5, ..cfg.clone() }.validate().is_err());
+        assert!(EvidenceConfig { voxel_size_m: -1.0, ..cfg }.validate().unwrap_err().contains("voxel_size_m"));
+    }
+}
