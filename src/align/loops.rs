@@ -23,6 +23,7 @@ use crate::pipeline::Progress;
 use crate::registration::downsample::voxel_downsample;
 use crate::registration::kdtree::{KdTree, to_f32};
 use crate::registration::{LoopConfig, PreparedCloud, preprocess, verify_loop};
+use crate::sensor::Fov;
 use crate::store::{LoopRow, SessionId, StoreError};
 use rayon::prelude::*;
 use std::collections::{BTreeMap, HashMap};
@@ -146,12 +147,15 @@ fn local_map(
 const SOURCE_BATCH: usize = 16;
 
 /// Registers and judges every candidate; `session` is the ingest that
-/// evaluates them (stored with each row). Rows come back in candidate order.
+/// evaluates them (stored with each row), `source_fov` the FoV of its
+/// sensor (every source is one of its keyframes). Rows come back in
+/// candidate order.
 pub fn evaluate(
     loader: &ScanLoader,
     sessions: &[SessionState],
     candidates: &[Candidate],
     session: SessionId,
+    source_fov: &Fov,
     cfg: &LoopConfig,
     progress: &dyn Progress,
 ) -> Result<Vec<LoopRow>, StoreError> {
@@ -161,7 +165,7 @@ pub fn evaluate(
         by_source.entry(c.source).or_default().push(i);
     }
     let sources: Vec<(KfRef, Vec<usize>)> = by_source.into_iter().collect();
-    let mut rows: HashMap<usize, LoopRow> = HashMap::with_capacity(candidates.len());
+    let mut rows: Vec<Option<LoopRow>> = vec![None; candidates.len()];
     progress.begin("loops", candidates.len() as u64);
     // Parallelism is over scans and candidates; GICP itself is serial here
     // (`parallel` off) so that many registrations run at once.
@@ -194,7 +198,7 @@ pub fn evaluate(
                 let src = &sessions[c.source.0].keyframes[c.source.1];
                 let tgt = &sessions[c.target.0].keyframes[c.target.1];
                 let t_init: Pose = tgt.t_world_keyframe.inverse() * src.t_world_keyframe;
-                let v = verify_loop(&maps[&c.target], &prepared[b], &t_init, &sessions[c.source.0].fov, cfg);
+                let v = verify_loop(&maps[&c.target], &prepared[b], &t_init, source_fov, cfg);
                 progress.advance(1);
                 let finite = |x: f64| x.is_finite().then_some(x);
                 (
@@ -219,8 +223,10 @@ pub fn evaluate(
                 )
             })
             .collect();
-        rows.extend(done);
+        for (i, row) in done {
+            rows[i] = Some(row);
+        }
     }
     progress.end();
-    Ok((0..candidates.len()).filter_map(|i| rows.remove(&i)).collect())
+    Ok(rows.into_iter().flatten().collect())
 }

@@ -31,7 +31,7 @@ pub mod maps;
 use crate::geometry::Pose;
 use crate::registration::estimate_fov;
 use crate::sensor::{Fov, SensorModel};
-use crate::store::{self, KeyframeRow, SessionId, SessionRow, Store, StoreError, SubmapRow};
+use crate::store::{self, KeyframeRow, SessionId, SessionRow, Store, StoreError};
 use serde::{Deserialize, Serialize};
 
 /// Coarse-alignment settings beyond those of the global registration itself.
@@ -67,8 +67,6 @@ pub struct KeyframeState {
 pub struct SessionState {
     pub row: SessionRow,
     pub keyframes: Vec<KeyframeState>,
-    pub submaps: Vec<SubmapRow>,
-    pub fov: Fov,
     /// Placed in the world (reference, global or initial guess). Unaligned
     /// sessions are neither part of the map others are registered against
     /// nor loop targets.
@@ -82,7 +80,7 @@ impl SessionState {
 }
 
 /// The FoV of a session: as stored (`session.toml`), else its sensor model's,
-/// else estimated from `scan`.
+/// else estimated from `scan` (read only then).
 pub fn session_fov(row: &SessionRow, scan: impl FnOnce() -> Option<Vec<[f32; 3]>>) -> Fov {
     if let Some(f) = row.fov_json.as_deref().and_then(|j| serde_json::from_str::<Fov>(j).ok()) {
         return f;
@@ -94,24 +92,17 @@ pub fn session_fov(row: &SessionRow, scan: impl FnOnce() -> Option<Vec<[f32; 3]>
 }
 
 /// Every session (ingest order) with its keyframes' world poses: from graph
-/// `version` where it has them, else `t_world_session · odometry` with
-/// `t_world_session` from `placement` (or identity).
-pub fn load_sessions(
-    store: &Store,
-    loader: &maps::ScanLoader,
-    version: Option<i64>,
-    placement: &dyn Fn(SessionId) -> Option<Pose>,
-) -> Result<Vec<SessionState>, StoreError> {
+/// `version` where it has them, else their odometry (a session not yet
+/// placed sits at the world origin until `coarse_align` moves it).
+pub fn load_sessions(store: &Store, version: Option<i64>) -> Result<Vec<SessionState>, StoreError> {
     let conn = store.conn();
     let mut out = Vec::new();
     for row in store::sessions(conn)? {
         let kfs = store::keyframes(conn, row.session_id)?;
-        let submaps = store::submaps(conn, row.session_id)?;
         let stored: std::collections::HashMap<i64, Pose> = match version {
             Some(v) => store::world_poses(conn, v, row.session_id)?.into_iter().collect(),
             None => Default::default(),
         };
-        let t_world_session = placement(row.session_id).unwrap_or_else(Pose::identity);
         let mut travel = 0.0;
         let mut keyframes: Vec<KeyframeState> = Vec::with_capacity(kfs.len());
         for kf in kfs {
@@ -119,14 +110,11 @@ pub fn load_sessions(
                 travel +=
                     (kf.t_session_keyframe.translation.vector - prev.row.t_session_keyframe.translation.vector).norm();
             }
-            let t_world_keyframe =
-                stored.get(&kf.keyframe_index).copied().unwrap_or_else(|| t_world_session * kf.t_session_keyframe);
+            let t_world_keyframe = stored.get(&kf.keyframe_index).copied().unwrap_or(kf.t_session_keyframe);
             keyframes.push(KeyframeState { row: kf, t_world_keyframe, travel_m: travel });
         }
-        let first = keyframes.first().map(|k| k.row.clone());
-        let fov = session_fov(&row, || first.and_then(|k| loader.load(&k).ok()).map(|s| s.points));
         let aligned = store::alignment(conn, row.session_id)?.is_some_and(|a| a.success);
-        out.push(SessionState { row, keyframes, submaps, fov, aligned });
+        out.push(SessionState { row, keyframes, aligned });
     }
     Ok(out)
 }

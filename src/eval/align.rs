@@ -60,6 +60,12 @@ pub fn rmse_after(t: &Pose, src: &[Vector3<f64>], dst: &[Vector3<f64>]) -> (f64,
     ((sum / n as f64).sqrt(), max)
 }
 
+/// RMSE left after the best rigid fit of `estimated` onto `truth`: what no
+/// single rigid motion of the trajectory can remove.
+pub fn rigid_residual(estimated: &[Vector3<f64>], truth: &[Vector3<f64>]) -> f64 {
+    rmse_after(&umeyama(estimated, truth), estimated, truth).0
+}
+
 /// One session's numbers.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct SessionAlignment {
@@ -82,13 +88,12 @@ pub fn evaluate(estimated: &[Vec<Vector3<f64>>], truth: &[Vec<Vector3<f64>>]) ->
         .enumerate()
         .map(|(i, (e, t))| {
             let (ate, ate_max) = rmse_after(&joint, e, t);
-            let own = umeyama(e, t);
             SessionAlignment {
                 session: i + 1,
                 keyframes: e.len(),
                 ate_rmse_m: ate,
                 ate_max_m: ate_max,
-                rigid_residual_m: rmse_after(&own, e, t).0,
+                rigid_residual_m: rigid_residual(e, t),
             }
         })
         .collect()

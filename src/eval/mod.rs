@@ -7,7 +7,7 @@
 
 pub mod align;
 
-use crate::align::{self as alignment, SessionState, graph, maps::ScanLoader};
+use crate::align::{self as alignment, SessionState, graph};
 use crate::geometry::Pose;
 use crate::graph::{AnchorMode, GraphConfig};
 use crate::sim::{GroundTruth, SimError, read_ground_truth};
@@ -160,9 +160,8 @@ pub fn align_report(
     cfg: &GraphConfig,
 ) -> Result<AlignReport, EvalError> {
     let truth = read_ground_truth(gt_dir)?;
-    let loader = ScanLoader::new(store)?;
     let version = store::latest_graph_version(store.conn())?;
-    let mut sessions = alignment::load_sessions(store, &loader, version, &|_| None)?;
+    let mut sessions = alignment::load_sessions(store, version)?;
     sessions.retain(|s| s.row.status == "complete");
     if sessions.is_empty() {
         return Err(EvalError::Mismatch("the store has no complete session to evaluate".into()));
@@ -171,13 +170,13 @@ pub fn align_report(
     let odometry: graph::WorldPoses =
         sessions.iter().map(|s| s.keyframes.iter().map(|k| k.row.t_session_keyframe).collect()).collect();
     let (odo, odo_true) = pairs(&sessions, &odometry, &truth)?;
-    let odometry_residual_m: Vec<f64> =
-        odo.iter().zip(&odo_true).map(|(e, t)| align::rmse_after(&align::umeyama(e, t), e, t).0).collect();
+    let odometry_residual_m: Vec<f64> = odo.iter().zip(&odo_true).map(|(e, t)| align::rigid_residual(e, t)).collect();
+    let loops = store::loops(store.conn(), true)?;
     let mut report = AlignReport {
         names: sessions.iter().map(|s| s.row.name.clone()).collect(),
         sessions: align::evaluate(&est, &tru),
         odometry_residual_m: odometry_residual_m.clone(),
-        loops: loop_accuracy(&sessions, &truth, &store::loops(store.conn(), true)?),
+        loops: loop_accuracy(&sessions, &truth, &loops),
         anchor_steps: Vec::new(),
     };
     if compare_anchors {
@@ -188,7 +187,6 @@ pub fn align_report(
                 placements.insert(s.id(), a.t_world_session);
             }
         }
-        let loops = store::loops(conn, true)?;
         for k in 2..=sessions.len() {
             for mode in [AnchorMode::Fixed, AnchorMode::Session, AnchorMode::Submap] {
                 let world = graph::replay(&sessions, &placements, &loops, k, mode, cfg)?;

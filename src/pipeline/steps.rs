@@ -161,17 +161,16 @@ fn make_submaps(ctx: &mut StepCtx<'_>, step: &'static str, seq: i64) -> Result<V
 
 /// The sessions alignment works on: every complete session and this one,
 /// with poses from the newest graph version.
-fn alignment_state(ctx: &StepCtx<'_>) -> Result<(ScanLoader, Vec<SessionState>, usize), IngestError> {
+fn alignment_state(ctx: &StepCtx<'_>) -> Result<(Vec<SessionState>, usize), IngestError> {
     let session = ctx.session()?;
-    let loader = ScanLoader::new(ctx.store)?;
     let version = store::latest_graph_version(ctx.store.conn())?;
-    let mut sessions = align::load_sessions(ctx.store, &loader, version, &|_| None)?;
+    let mut sessions = align::load_sessions(ctx.store, version)?;
     sessions.retain(|s| s.row.status == "complete" || s.id() == session);
     let new = sessions.iter().position(|s| s.id() == session).ok_or_else(|| store::StoreError::Corrupt {
         path: ctx.store.root().to_path_buf(),
         message: format!("session {} has no rows to align", session.0),
     })?;
-    Ok((loader, sessions, new))
+    Ok((sessions, new))
 }
 
 /// Step `coarse_align` (MATH.md §2): where the new session's frame sits in
@@ -183,7 +182,8 @@ fn coarse_align(ctx: &mut StepCtx<'_>, step: &'static str, seq: i64) -> Result<V
     let started_at = store::now_utc();
     let t0 = Instant::now();
     let session = ctx.session()?;
-    let (loader, sessions, new) = alignment_state(ctx)?;
+    let (sessions, new) = alignment_state(ctx)?;
+    let loader = ScanLoader::new(ctx.store)?;
     let cc = &ctx.config.coarse;
     let stride = cc.map_keyframe_stride.max(1);
     let row = if !sessions.iter().enumerate().any(|(i, s)| i != new && s.aligned) {
@@ -210,12 +210,8 @@ fn coarse_align(ctx: &mut StepCtx<'_>, step: &'static str, seq: i64) -> Result<V
         row
     };
     let t_world_session = row.t_world_session;
-    let mut placed = sessions[new].clone();
-    for k in &mut placed.keyframes {
-        k.t_world_keyframe = t_world_session * k.row.t_session_keyframe;
-    }
-    let world = align::graph::current(std::slice::from_ref(&placed));
-    let (anchors, locals) = align::graph::to_version_rows(std::slice::from_ref(&placed), &world);
+    let placed = vec![sessions[new].keyframes.iter().map(|k| t_world_session * k.row.t_session_keyframe).collect()];
+    let (anchors, locals) = align::graph::to_version_rows(std::slice::from_ref(&sessions[new]), &placed);
     let base = store::latest_graph_version(ctx.store.conn())?;
     let details = json!({
         "method": row.method,
@@ -242,15 +238,18 @@ fn find_loops(ctx: &mut StepCtx<'_>, step: &'static str, seq: i64) -> Result<Val
     let started_at = store::now_utc();
     let t0 = Instant::now();
     let session = ctx.session()?;
-    let (loader, sessions, new) = alignment_state(ctx)?;
-    let aligned = store::alignment(ctx.store.conn(), session)?.map(|a| a.success).unwrap_or(false);
+    let (sessions, new) = alignment_state(ctx)?;
+    let loader = ScanLoader::new(ctx.store)?;
+    let aligned = sessions[new].aligned;
     let cfg = &ctx.config.loops;
     let mut candidates = align::loops::intra_candidates(&sessions, new, cfg);
     let intra = candidates.len();
     if aligned {
         candidates.extend(align::loops::inter_candidates(&sessions, new, cfg));
     }
-    let rows = align::loops::evaluate(&loader, &sessions, &candidates, session, cfg, ctx.progress)?;
+    let first = sessions[new].keyframes.first().map(|k| &k.row);
+    let fov = align::session_fov(&sessions[new].row, || first.and_then(|k| loader.load(k).ok()).map(|s| s.points));
+    let rows = align::loops::evaluate(&loader, &sessions, &candidates, session, &fov, cfg, ctx.progress)?;
     let accepted = |kind: &str| rows.iter().filter(|r| r.accepted && r.kind == kind).count();
     let details = json!({
         "intra_candidates": intra,
@@ -271,7 +270,7 @@ fn optimize_graph(ctx: &mut StepCtx<'_>, step: &'static str, seq: i64) -> Result
     let started_at = store::now_utc();
     let t0 = Instant::now();
     let session = ctx.session()?;
-    let (_loader, sessions, _new) = alignment_state(ctx)?;
+    let (sessions, _) = alignment_state(ctx)?;
     let loops = store::loops(ctx.store.conn(), true)?;
     let mode = ctx.anchor_mode.unwrap_or(ctx.config.graph.mode);
     let frozen: HashSet<SessionId> = sessions.iter().map(|s| s.id()).filter(|&id| id != session).collect();
@@ -285,7 +284,7 @@ fn optimize_graph(ctx: &mut StepCtx<'_>, step: &'static str, seq: i64) -> Result
             (world, json!({ "mode": mode.name(), "loops": used, "report": report, "max_keyframe_move_m": moved }))
         }
         // A graph the solver cannot handle keeps the current estimate; the
-        // step log says so (and `seam info` shows it).
+        // step's details (in the step log and the ingest receipt) say so.
         Err(e) => (initial, json!({ "mode": mode.name(), "error": e.to_string() })),
     };
     let (anchors, locals) = align::graph::to_version_rows(&sessions, &world);
