@@ -138,14 +138,7 @@ pub(crate) fn odometry(truth: &[Pose], length_m: f64, seed: u64, session: usize,
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sim::ground::Ground;
-    use crate::sim::site::Roads;
-    use crate::sim::trajectory::{TruePath, true_path};
-
-    fn path(session: usize, keyframes: usize) -> TruePath {
-        let ground = Ground::new(1, |_, _| false);
-        true_path(&Roads::site(), &ground, 21, session, keyframes, 1.0)
-    }
+    use crate::sim::trajectory::tests::path;
 
     #[test]
     fn odometry_drifts_one_to_three_metres_over_300_m_mostly_in_yaw() {

@@ -303,11 +303,13 @@ pub(crate) fn true_path(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use nalgebra::Vector3;
 
-    fn path(session: usize, keyframes: usize) -> TruePath {
+    /// A route over flat ground (seed 21, 1 m spacing), for this module's
+    /// tests and the odometry's.
+    pub(crate) fn path(session: usize, keyframes: usize) -> TruePath {
         let ground = Ground::new(1, |_, _| false);
         true_path(&Roads::site(), &ground, 21, session, keyframes, 1.0)
     }

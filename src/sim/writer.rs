@@ -8,6 +8,7 @@ use super::SimError;
 use super::assets::Surface;
 use super::dynamics::{Mover, MoverPose};
 use super::scan::KeyframeScan;
+use super::shapes::Shape;
 use super::site::SiteObject;
 use crate::geometry::{Pose, pose_to_kitti_row};
 use crate::sensor::SensorModel;
@@ -66,26 +67,19 @@ pub(crate) fn session_toml(session: usize, date: &str, sensor: SensorModel, plat
     )
 }
 
+/// A box's `cx,cy,cz,length,width,height,yaw` columns, as every CSV here writes them.
+fn box_csv(b: &Shape) -> String {
+    let (c, z) = (b.center, b.size);
+    format!("{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.6}", c[0], c[1], c[2], z[0], z[1], z[2], b.yaw)
+}
+
 /// `gt/dynamic.csv`: every mover's box at every keyframe.
 pub(crate) fn dynamic_csv(movers: &[Mover], times: &[f64], poses: &[Vec<MoverPose>]) -> String {
     let mut s = String::from("keyframe,time_s,object_id,class,label,cx,cy,cz,length,width,height,yaw\n");
     for (k, (t, row)) in times.iter().zip(poses).enumerate() {
         for (m, p) in movers.iter().zip(row) {
             let b = m.bbox_at(p);
-            let _ = writeln!(
-                s,
-                "{k},{t:.6},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.6}",
-                m.object.id.0,
-                m.object.class,
-                m.object.label,
-                b.center[0],
-                b.center[1],
-                b.center[2],
-                b.size[0],
-                b.size[1],
-                b.size[2],
-                b.yaw
-            );
+            let _ = writeln!(s, "{k},{t:.6},{},{},{},{}", m.object.id.0, m.object.class, m.object.label, box_csv(&b));
         }
     }
     s
@@ -100,18 +94,12 @@ pub(crate) fn objects_csv(objects: &[SiteObject]) -> String {
         let list: Vec<String> = o.sessions.iter().map(|x| x.to_string()).collect();
         let _ = writeln!(
             s,
-            "{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.6},{},{},{}",
+            "{},{},{},{},{},{},{},{}",
             o.id.0,
             o.class,
             o.label,
             o.dynamic as u8,
-            b.center[0],
-            b.center[1],
-            b.center[2],
-            b.size[0],
-            b.size[1],
-            b.size[2],
-            b.yaw,
+            box_csv(b),
             o.sessions.first().copied().unwrap_or(0),
             o.sessions.last().copied().unwrap_or(0),
             list.join(";")
@@ -131,20 +119,13 @@ pub(crate) fn primitives_csv(objects: &[SiteObject]) -> String {
                 Surface::Mesh { pass } => ("mesh", pass),
                 Surface::Foliage { extinction_per_m } => ("foliage", extinction_per_m),
             };
-            let (c, z) = (p.shape.center, p.shape.size);
             let _ = writeln!(
                 s,
-                "{},{k},{},{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.6},{:.3},{surface},{param:.3}",
+                "{},{k},{},{},{},{:.3},{surface},{param:.3}",
                 o.id.0,
                 p.shape.kind.name(),
                 p.label,
-                c[0],
-                c[1],
-                c[2],
-                z[0],
-                z[1],
-                z[2],
-                p.shape.yaw,
+                box_csv(&p.shape),
                 p.reflectivity
             );
         }
