@@ -1,4 +1,4 @@
-//! Every bad input of issue 2 (point 4): a clear error naming the file and
+//! Every bad input (issue 2 point 4, and issue 3's options): a clear error naming the file and
 //! the place, the documented exit code, and a store left exactly as it was.
 
 mod common;
@@ -220,4 +220,37 @@ fn usage_errors_exit_2() {
     assert!(stderr(&o).contains("os1-64"), "{}", stderr(&o));
     let o = run(&["frobnicate"]);
     assert_eq!(o.status.code(), Some(2));
+}
+
+/// The alignment options and settings of issue 3: a malformed
+/// `--initial-guess`, an unknown `--anchors` mode, a config with a zero σ or
+/// a misspelt key — each exit 2 with a message naming the problem, and the
+/// store unchanged. A `--gt` folder that is not a simulator's output is a
+/// data error (exit 4).
+#[test]
+fn bad_alignment_options_and_settings() {
+    let (t, store, bad) = setup();
+    let (st, dir) = (store.to_str().unwrap(), bad.to_str().unwrap());
+    let before = store_state(&store);
+    let zero_sigma = t.path().join("zero.toml");
+    std::fs::write(&zero_sigma, "[graph]\nloop_sigma_trans_m = 0.0\n").unwrap();
+    let typo = t.path().join("typo.toml");
+    std::fs::write(&typo, "[loops.dop]\nrho_mx = 4.0\n").unwrap();
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        (vec!["ingest", st, dir, "--initial-guess", "1,2,3"], "expected 4 finite numbers"),
+        (vec!["ingest", st, dir, "--initial-guess", "1,2,x,4"], "\"x\" is not a number"),
+        (vec!["ingest", st, dir, "--anchors", "rigid"], "is not an anchor mode"),
+        (vec!["--config", zero_sigma.to_str().unwrap(), "ingest", st, dir], "graph.loop_sigma_trans_m"),
+        (vec!["--config", typo.to_str().unwrap(), "ingest", st, dir], "rho_mx"),
+    ];
+    for (args, fragment) in cases {
+        let o = run(&args);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {}", stderr(&o));
+        assert!(stderr(&o).contains(fragment), "{args:?}: message lacks {fragment:?}:\n{}", stderr(&o));
+        assert_same_state(&before, &store_state(&store), &format!("after {args:?}"));
+    }
+    let o = run(&["eval", "align", st, "--gt", dir]);
+    assert_eq!(o.status.code(), Some(4), "{}", stderr(&o));
+    assert!(stderr(&o).contains(dir), "the message does not name the folder:\n{}", stderr(&o));
+    assert_same_state(&before, &store_state(&store), "after eval align with a bad --gt");
 }
