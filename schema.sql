@@ -155,3 +155,32 @@ CREATE TABLE loop_candidates (
 );
 CREATE INDEX loop_candidates_by_session ON loop_candidates(session_id, accepted);
 CREATE INDEX loop_candidates_by_keyframes ON loop_candidates(source_keyframe, target_keyframe);
+
+-- @migration 3
+-- Directional evidence, cleaned maps and DOR labels (MATH.md §6-7). Each file
+-- is immutable and holds positions on the world grid of the graph version it
+-- was generated from; later versions reproject it (eqs. 9-11).
+CREATE TABLE evidence_files (
+    file_id        INTEGER PRIMARY KEY REFERENCES files(file_id),
+    session_id     INTEGER NOT NULL REFERENCES sessions(session_id),
+    submap_id      INTEGER REFERENCES submaps(submap_id),   -- NULL for per-session files
+    kind           TEXT NOT NULL CHECK (kind IN ('evidence', 'cleaned_map', 'point_labels')),
+    graph_version  INTEGER NOT NULL REFERENCES graph_versions(graph_version),
+    row_count      INTEGER NOT NULL
+);
+CREATE INDEX evidence_files_by_session ON evidence_files(session_id, kind);
+
+-- One row per session: what its evidence step generated and removed.
+CREATE TABLE session_dor (
+    session_id        INTEGER PRIMARY KEY REFERENCES sessions(session_id),
+    graph_version     INTEGER NOT NULL REFERENCES graph_versions(graph_version),
+    model             TEXT NOT NULL,            -- directional | log_odds
+    points            INTEGER NOT NULL,
+    dynamic_points    INTEGER NOT NULL,
+    interest_voxels   INTEGER NOT NULL,
+    generated_voxels  INTEGER NOT NULL,
+    dynamic_voxels    INTEGER NOT NULL,
+    cleaned_voxels    INTEGER NOT NULL,
+    raycast_s         REAL NOT NULL,
+    total_s           REAL NOT NULL
+);

@@ -18,6 +18,9 @@
 //!
 //! [global]             # registration::global::GlobalConfig
 //! voxel_size_m = 0.75
+//!
+//! [evidence]           # evidence::EvidenceConfig
+//! model = "log_odds"   # the scalar baseline instead of directional evidence
 //! ```
 
 use serde::{Deserialize, Serialize};
@@ -36,6 +39,8 @@ pub struct Config {
     pub loops: crate::registration::LoopConfig,
     /// The pose graph (MATH.md §5).
     pub graph: crate::graph::GraphConfig,
+    /// Directional evidence, DOR and the scalar baseline (MATH.md §6).
+    pub evidence: crate::evidence::EvidenceConfig,
 }
 
 /// Submap cutting (MATH.md §1).
@@ -131,6 +136,7 @@ impl Config {
         self.global
             .validate()
             .map_err(|m| ConfigError::Invalid { path: path.into(), message: format!("global: {m}") })?;
+        self.evidence.validate().map_err(|m| ConfigError::Invalid { path: path.into(), message: m })?;
         Ok(())
     }
 }

@@ -254,3 +254,32 @@ fn bad_alignment_options_and_settings() {
     assert!(stderr(&o).contains(dir), "the message does not name the folder:\n{}", stderr(&o));
     assert_same_state(&before, &store_state(&store), "after eval align with a bad --gt");
 }
+
+/// The evidence stage's inputs (issue 4): an unknown evidence model or a
+/// negative clearance in the config is a usage error (exit 2) naming the
+/// key; `seam eval dor` with a labels folder that has no labels, or a session
+/// the store does not have, is a data error (exit 4) naming the file or the
+/// sessions there are. The store is unchanged every time.
+#[test]
+fn bad_evidence_settings_and_dor_inputs() {
+    let (t, store, bad) = setup();
+    let (st, dir) = (store.to_str().unwrap(), bad.to_str().unwrap());
+    let before = store_state(&store);
+    let model = t.path().join("model.toml");
+    std::fs::write(&model, "[evidence]\nmodel = \"octomap\"\n").unwrap();
+    let clearance = t.path().join("clearance.toml");
+    std::fs::write(&clearance, "[evidence]\nfree_clearance_m = -1.0\n").unwrap();
+    for (cfg, fragment) in [(&model, "octomap"), (&clearance, "free_clearance_m")] {
+        let o = run(&["--config", cfg.to_str().unwrap(), "ingest", st, dir]);
+        assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+        assert!(stderr(&o).contains(fragment), "message lacks {fragment:?}:\n{}", stderr(&o));
+        assert_same_state(&before, &store_state(&store), "after a bad evidence config");
+    }
+    let o = run(&["eval", "dor", st, "--labels", dir]);
+    assert_eq!(o.status.code(), Some(4), "{}", stderr(&o));
+    assert!(stderr(&o).contains("000000.label"), "the message does not name the label file:\n{}", stderr(&o));
+    let o = run(&["eval", "dor", st, "--labels", dir, "--session", "nope"]);
+    assert_eq!(o.status.code(), Some(4), "{}", stderr(&o));
+    assert!(stderr(&o).contains("no session named \"nope\""), "{}", stderr(&o));
+    assert_same_state(&before, &store_state(&store), "after eval dor with bad inputs");
+}

@@ -36,7 +36,9 @@ fn orphan_listed_then_repaired_and_damage_detected() {
     let o = run(&["check", store.to_str().unwrap(), "--format", "json"]);
     let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
     assert_eq!(v["report"]["orphans"].as_array().unwrap().len(), 0);
-    assert_eq!(v["report"]["files_checked"], 1);
+    // The session's scans, plus its evidence step's submap evidence, cleaned
+    // map and point labels (one submap).
+    assert_eq!(v["report"]["files_checked"], 4);
 
     // One flipped byte in a referenced file is found by its hash.
     let scans = std::fs::read_dir(store.join("data/scans")).unwrap().next().unwrap().unwrap().path();

@@ -41,7 +41,7 @@ fn sessions_are_aligned_jointly_within_a_decimetre() {
     for (k, s) in summary["sessions"].as_array().unwrap().iter().enumerate() {
         let r = json_of(&["ingest", st, s["dir"].as_str().unwrap(), "--format", "json"]);
         let steps: Vec<&str> = r["steps"].as_array().unwrap().iter().map(|s| s["step"].as_str().unwrap()).collect();
-        assert_eq!(steps, ["scans", "submaps", "coarse_align", "loops", "optimize", "complete"]);
+        assert_eq!(steps, ["scans", "submaps", "coarse_align", "loops", "optimize", "evidence", "complete"]);
         let coarse = &r["steps"][2]["details"];
         let loops = &r["steps"][3]["details"];
         if k == 0 {

@@ -1,4 +1,5 @@
 //! `seam eval align site.seam --gt SIM_DIR [--compare-anchors]`
+//! `seam eval dor site.seam --labels SESSION_DIR [--session NAME] [--predicted PRED_DIR]`
 //!
 //! Alignment against a simulator's ground truth: per-session ATE (one
 //! Umeyama SE(3) fit over all sessions) and rigid residual (each session's
@@ -8,7 +9,8 @@
 
 use super::output::{print_json, print_table};
 use super::{Ctx, Format};
-use crate::eval::{AlignReport, align_report};
+use crate::eval::dor::render_table;
+use crate::eval::{AlignReport, align_report, dor_report};
 use crate::store::Store;
 use clap::{Args, Subcommand};
 use std::path::PathBuf;
@@ -17,6 +19,26 @@ use std::path::PathBuf;
 pub enum EvalCommand {
     /// Trajectory accuracy against simulated ground truth (ATE, rigid residual).
     Align(AlignArgs),
+    /// Dynamic object removal against SemanticKITTI-style labels (PR, RR, F1,
+    /// precision of removal; point-wise and voxel-wise at 0.2 m).
+    Dor(DorArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct DorArgs {
+    /// The store.
+    pub store: PathBuf,
+    /// Folder with the ground truth as `labels/NNNNNN.label` (the session
+    /// folder that was ingested, for SemanticKITTI and simulated sessions).
+    #[arg(long)]
+    pub labels: PathBuf,
+    /// The session to score (needed when the store has several).
+    #[arg(long)]
+    pub session: Option<String>,
+    /// Score another tool's verdicts instead of the store's: label files
+    /// `PRED/labels/NNNNNN.label`, moving classes (252-259) meaning removed.
+    #[arg(long, value_name = "PRED")]
+    pub predicted: Option<PathBuf>,
 }
 
 #[derive(Debug, Args)]
@@ -33,6 +55,27 @@ pub struct AlignArgs {
 
 pub fn run(ctx: &Ctx, cmd: EvalCommand) -> anyhow::Result<()> {
     match cmd {
+        EvalCommand::Dor(a) => {
+            let store = Store::open_read_only(&a.store)?;
+            let report = dor_report(&store, &a.labels, a.session.as_deref(), a.predicted.as_deref())?;
+            match ctx.format {
+                Format::Json => print_json(&report)?,
+                _ => {
+                    println!(
+                        "session {} ({} points, verdicts from {}{})",
+                        report.session,
+                        report.points,
+                        report.predicted,
+                        report.model.as_deref().map(|m| format!(", model {m}")).unwrap_or_default()
+                    );
+                    if let (Some(s), Some(r)) = (report.evidence_s, report.points_per_s) {
+                        println!("evidence step: {s:.2} s, {r:.0} points/s");
+                    }
+                    print!("{}", render_table(&report.scores));
+                }
+            }
+            Ok(())
+        }
         EvalCommand::Align(a) => {
             let store = Store::open_read_only(&a.store)?;
             let report = align_report(&store, &a.gt, a.compare_anchors, &ctx.config.graph)?;

@@ -12,6 +12,7 @@ mod check;
 mod demo;
 mod eval;
 mod exit;
+mod export;
 mod ingest;
 mod init;
 mod output;
@@ -74,6 +75,8 @@ pub enum Command {
     /// Measure the store against ground truth.
     #[command(subcommand)]
     Eval(eval::EvalCommand),
+    /// Write tables of a store as Parquet for analysts.
+    Export(export::ExportArgs),
 }
 
 /// Shared settings resolved once from the global flags.
@@ -123,5 +126,6 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Simulate(a) => simulate::run(&ctx, a),
         Command::Demo(a) => demo::run(&ctx, a),
         Command::Eval(c) => eval::run(&ctx, c),
+        Command::Export(a) => export::run(&ctx, a),
     }
 }

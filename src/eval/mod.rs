@@ -4,8 +4,15 @@
 //! - [`align_report`]: those numbers for a store against a simulator's
 //!   output folder, and optionally the Table II comparison of anchor modes
 //!   replayed on the store's own loops.
+//! - [`dor`]: dynamic object removal scored against SemanticKITTI labels
+//!   (PR, RR, F1, precision of removal; point-wise and voxel-wise).
 
 pub mod align;
+pub mod dor;
+mod dor_store;
+pub use dor_store::{DorReport, dor_report};
+
+pub use dor::{DorAccumulator, DorBlock, DorScores, is_moving_label, read_label_file, render_table};
 
 use crate::align::{self as alignment, SessionState, graph};
 use crate::geometry::Pose;

@@ -205,7 +205,11 @@ fn apply(
     map: &mut EvidenceMap,
 ) -> KeyframeEvidence {
     let mut out = KeyframeEvidence { rays, skipped_rays: rays - cast, ..Default::default() };
-    for (key, kinds) in marks {
+    for (key, mut kinds) in marks {
+        // A keyframe does not free a voxel it hit (as in `grid`).
+        if kinds & HIT != 0 {
+            kinds &= !FREE;
+        }
         let c = key.center_m(cfg.voxel_size_m);
         let d = [c.x - origin_m[0], c.y - origin_m[1], c.z - origin_m[2]];
         let r = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
@@ -343,11 +347,12 @@ mod tests {
         accumulate_keyframe(&[-20.1, 0.1, 0.1], &p, 2, &cfg(), &mut map); // r = 50 m
         let v = map[&VoxelKey([150, 0, 0])];
         assert_eq!((v.hit.n, v.owner_keyframe, v.owner_q), (3, 1, 1.0));
-        // A voxel both hit and freed by one keyframe counts 2q for it.
+        // A voxel one keyframe both hit and passed through counts as a hit
+        // only (the hit wins), with weight q.
         let mut map = EvidenceMap::default();
         let origin = [0.1, 0.1, 0.1];
         accumulate_keyframe(&origin, &[[1.1, 0.1, 0.1], [3.1, 0.1, 0.1]], 4, &cfg(), &mut map);
         let v = map[&VoxelKey([5, 0, 0])];
-        assert_eq!((v.hit.n, v.free.n, v.owner_q), (1, 1, 2.0));
+        assert_eq!((v.hit.n, v.free.n, v.owner_q), (1, 0, 1.0));
     }
 }

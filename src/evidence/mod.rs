@@ -34,9 +34,13 @@
 //!   [`accumulate_keyframe_par`] into an [`EvidenceMap`]
 
 mod accumulate;
+pub mod grid;
 mod raycast;
+pub mod session;
 mod stats;
+mod tables;
 
 pub use accumulate::{EvidenceMap, KeyframeEvidence, accumulate_keyframe, accumulate_keyframe_par};
 pub use raycast::{cast_ray, traverse, voxel_key};
-pub use stats::{DirectionalStats, EvidenceConfig, VoxelEvidence, sym3_eigenvalues};
+pub use stats::{DirectionalStats, EvidenceConfig, EvidenceModel, LogOddsConfig, VoxelEvidence, sym3_eigenvalues};
+pub use tables::{CleanedMap, PointLabels, StatsColumns, SubmapEvidence};

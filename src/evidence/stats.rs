@@ -38,6 +38,88 @@ pub struct EvidenceConfig {
     /// all; the value of c is to be measured on real data (PR of DOR), and
     /// this default changed only with the numbers that justify it.
     pub pseudo_count: f64,
+    /// A keyframe does not free a voxel it hit, nor one within this many
+    /// voxels (Chebyshev) of a voxel it hit: a ray grazing a surface the same
+    /// scan sees is not evidence that the surface is gone. 0 keeps only the
+    /// first rule. (DUFOMap's hit extension and "no ray pass-through hits"
+    /// play the same role.)
+    pub free_guard_voxels: u32,
+    /// DOR removes a voxel only if none of its 26 neighbours is a static
+    /// occupied voxel (hit, ε_l ≤ τ_dyn). A surface grazed by rays is freed
+    /// in patches, but its patches touch parts that were not; a mover stands
+    /// in free space. (DUFOMap's "unknown inflation" d_p plays this role.)
+    pub static_neighbour_veto: bool,
+    /// A ray that ends below the sensor (by 0.5 m or more) frees only voxels
+    /// whose centre is at least this much above its endpoint. Rays to the ground graze it for
+    /// metres before they end (at 40 m a ray from 1.7 m height runs within one
+    /// voxel of the road for its last 4.6 m) and would free the road that
+    /// other keyframes hit. Movers stand above the ground, and rays that end
+    /// above the sensor are not limited. 0 disables it.
+    pub free_clearance_m: f64,
+    /// Which per-voxel model turns rays into ε_l: seam's directional
+    /// evidence, or the scalar log-odds baseline for the ablation.
+    pub model: EvidenceModel,
+    /// The scalar baseline's parameters (used when `model = "log_odds"`).
+    pub log_odds: LogOddsConfig,
+}
+
+/// The per-voxel model behind ε_l.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum EvidenceModel {
+    /// Directional hit/free evidence, eqs. 4-8.
+    #[default]
+    Directional,
+    /// OctoMap-style scalar occupancy on the same rays: per keyframe, a
+    /// voxel's log-odds gains `logit(prob_hit)` if the keyframe hit it, else
+    /// `logit(prob_miss)` if it freed it, clamped after every update; then
+    /// `ε_l = 1 − P(occupied)`. The baseline the paper argues against.
+    LogOdds,
+}
+
+/// OctoMap's defaults (Hornung et al. 2013).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct LogOddsConfig {
+    pub prob_hit: f64,
+    pub prob_miss: f64,
+    pub clamp_min: f64,
+    pub clamp_max: f64,
+}
+
+impl Default for LogOddsConfig {
+    fn default() -> Self {
+        LogOddsConfig { prob_hit: 0.7, prob_miss: 0.4, clamp_min: 0.12, clamp_max: 0.97 }
+    }
+}
+
+fn logit(p: f64) -> f64 {
+    (p / (1.0 - p)).ln()
+}
+
+impl LogOddsConfig {
+    /// `(l_hit, l_miss, l_min, l_max)` in log-odds.
+    pub fn log_odds(&self) -> (f32, f32, f32, f32) {
+        let l = |p| logit(p) as f32;
+        (l(self.prob_hit), l(self.prob_miss), l(self.clamp_min), l(self.clamp_max))
+    }
+
+    fn validate(&self) -> Result<(), String> {
+        for (name, v) in [
+            ("prob_hit", self.prob_hit),
+            ("prob_miss", self.prob_miss),
+            ("clamp_min", self.clamp_min),
+            ("clamp_max", self.clamp_max),
+        ] {
+            if !(v > 0.0 && v < 1.0) {
+                return Err(format!("evidence.log_odds.{name} is {v}; it must lie strictly between 0 and 1"));
+            }
+        }
+        if !(self.prob_hit > 0.5 && self.prob_miss < 0.5 && self.clamp_min < 0.5 && self.clamp_max > 0.5) {
+            return Err("evidence.log_odds needs prob_hit > 0.5, prob_miss < 0.5, clamp_min < 0.5 < clamp_max".into());
+        }
+        Ok(())
+    }
 }
 
 impl Default for EvidenceConfig {
@@ -53,6 +135,11 @@ impl Default for EvidenceConfig {
             eps_min: 0.1,
             eps_max: 1.0,
             pseudo_count: 0.0,
+            free_guard_voxels: 1,
+            static_neighbour_veto: false,
+            free_clearance_m: 0.3,
+            model: EvidenceModel::Directional,
+            log_odds: LogOddsConfig::default(),
         }
     }
 }
@@ -67,7 +154,9 @@ impl EvidenceConfig {
                 return Err(format!("evidence.{name} is {v}; it must be a positive number"));
             }
         }
-        for (name, v) in [("r0_m", self.r0_m), ("pseudo_count", self.pseudo_count)] {
+        for (name, v) in
+            [("r0_m", self.r0_m), ("pseudo_count", self.pseudo_count), ("free_clearance_m", self.free_clearance_m)]
+        {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(format!("evidence.{name} is {v}; it must be zero or a positive number"));
             }
@@ -84,7 +173,7 @@ impl EvidenceConfig {
         if !(0.0..=1.0).contains(&self.tau_dyn) {
             return Err(format!("evidence.tau_dyn is {}; it must lie in [0, 1] (default 0.5)", self.tau_dyn));
         }
-        Ok(())
+        self.log_odds.validate()
     }
 
     /// Eq. 4: the weight of one keyframe's observation at range `r_m`.
@@ -92,6 +181,9 @@ impl EvidenceConfig {
         (-(r_m - self.r0_m).max(0.0) / self.rs_m).exp()
     }
 }
+
+/// α below this is treated as 0 (see [`DirectionalStats::alpha`]).
+pub const ALPHA_FLOOR: f64 = 1e-4;
 
 /// One kind of evidence (hit or free) of one voxel.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
@@ -127,9 +219,14 @@ impl DirectionalStats {
 
     /// `α = λ1 / λ2` of M (0 when λ2 = 0), in [0, 1]: near 0 when every
     /// observation shares one direction (MATH.md §6's choice over λ2/λ1).
+    ///
+    /// Below [`ALPHA_FLOOR`] α is rounding noise (one direction gives a rank-1
+    /// M whose λ1 is ~1e-7·λ2 in f32 storage) and reads as exactly 0: with
+    /// both ω near 0, eq. 8's `f / (h + f)` would otherwise be a ratio of two
+    /// noise values.
     pub fn alpha(&self) -> f64 {
         let [_, l1, l2] = sym3_eigenvalues(&self.m);
-        if l2 > 0.0 { (l1 / l2).clamp(0.0, 1.0) } else { 0.0 }
+        if l2 > 0.0 && l1 > ALPHA_FLOOR * l2 { (l1 / l2).clamp(0.0, 1.0) } else { 0.0 }
     }
 
     /// Eq. 5: `ω = clip(α/α0, 0, 1) · min(1, Q/n0)`.

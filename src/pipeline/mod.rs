@@ -15,6 +15,7 @@
 //!
 //! Alignment, evidence and change detection plug in as further [`Step`]s.
 
+mod evidence_step;
 mod ingest;
 mod steps;
 mod submaps;

@@ -30,6 +30,7 @@ pub(super) const STEPS: &[Step] = &[
     Step { name: "coarse_align", run: coarse_align },
     Step { name: "loops", run: find_loops },
     Step { name: "optimize", run: optimize_graph },
+    Step { name: "evidence", run: super::evidence_step::evidence },
     Step { name: "complete", run: complete },
 ];
 
@@ -50,7 +51,7 @@ pub(super) struct StepCtx<'a> {
 }
 
 impl StepCtx<'_> {
-    fn session(&self) -> Result<SessionId, IngestError> {
+    pub(super) fn session(&self) -> Result<SessionId, IngestError> {
         self.session.ok_or_else(|| {
             store::StoreError::Corrupt {
                 path: self.store.root().to_path_buf(),
@@ -64,7 +65,7 @@ impl StepCtx<'_> {
     /// is added, then (after the `<step>:before_commit` fault point) the
     /// transaction commits. `write` returns the session id (for the step that
     /// creates it) and the details to log.
-    fn commit(
+    pub(super) fn commit(
         &mut self,
         step: &'static str,
         seq: i64,
@@ -161,7 +162,7 @@ fn make_submaps(ctx: &mut StepCtx<'_>, step: &'static str, seq: i64) -> Result<V
 
 /// The sessions alignment works on: every complete session and this one,
 /// with poses from the newest graph version.
-fn alignment_state(ctx: &StepCtx<'_>) -> Result<(Vec<SessionState>, usize), IngestError> {
+pub(super) fn alignment_state(ctx: &StepCtx<'_>) -> Result<(Vec<SessionState>, usize), IngestError> {
     let session = ctx.session()?;
     let version = store::latest_graph_version(ctx.store.conn())?;
     let mut sessions = align::load_sessions(ctx.store, version)?;

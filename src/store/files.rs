@@ -74,10 +74,10 @@ pub fn insert_file(
 }
 
 /// Counts and hashes every byte on its way to the file.
-struct HashingWriter {
-    inner: BufWriter<File>,
-    hasher: blake3::Hasher,
-    bytes: u64,
+pub(super) struct HashingWriter {
+    pub(super) inner: BufWriter<File>,
+    pub(super) hasher: blake3::Hasher,
+    pub(super) bytes: u64,
 }
 
 impl Write for HashingWriter {
@@ -185,7 +185,7 @@ impl ScanWriter {
 
 /// Renames a fully written and synced file into place and syncs the folder,
 /// so that the rename itself survives a power loss.
-fn publish(tmp_path: &Path, final_path: &Path) -> Result<(), StoreError> {
+pub(super) fn publish(tmp_path: &Path, final_path: &Path) -> Result<(), StoreError> {
     std::fs::rename(tmp_path, final_path).map_err(|e| StoreError::io(final_path, e))?;
     if let Some(dir) = final_path.parent() {
         File::open(dir).and_then(|d| d.sync_all()).map_err(|e| StoreError::io(dir, e))?;

@@ -23,12 +23,15 @@
 
 mod alignment;
 mod check;
+pub mod evidence_files;
+mod evidence_rows;
 mod files;
 mod rows;
 mod schema;
 
 pub use alignment::*;
 pub use check::{CheckReport, FileProblem};
+pub use evidence_rows::*;
 pub use files::{FileRecord, ScanWriter, file_paths, insert_file, read_scan_row_group};
 pub use rows::*;
 pub use schema::{SCHEMA_SQL, SCHEMA_VERSION};

@@ -87,7 +87,17 @@ pub fn snapshot_files(root: &Path) -> Vec<(String, Vec<u8>)> {
 }
 
 /// Columns whose values are wall-clock times and differ between runs.
-const TIME_COLUMNS: &[&str] = &["created_at", "completed_at", "started_at", "finished_at", "wall_s", "elapsed_s"];
+const TIME_COLUMNS: &[&str] =
+    &["created_at", "completed_at", "started_at", "finished_at", "wall_s", "elapsed_s", "raycast_s", "total_s"];
+
+/// A step's details without its timings (keys ending in `_s`), which differ
+/// between any two runs.
+fn without_timings(v: &mut serde_json::Value) {
+    if let Some(m) = v.as_object_mut() {
+        m.retain(|k, _| !k.ends_with("_s"));
+        m.values_mut().for_each(without_timings);
+    }
+}
 
 /// The content of every table of a store's database, rows sorted, time
 /// columns left out (steps keep timings out of `details_json`).
@@ -114,6 +124,13 @@ pub fn dump_db(store: &Path) -> String {
                         continue;
                     }
                     let v: rusqlite::types::Value = r.get(i)?;
+                    if let (true, rusqlite::types::Value::Text(t)) = (c == "details_json", &v)
+                        && let Ok(mut j) = serde_json::from_str::<serde_json::Value>(t)
+                    {
+                        without_timings(&mut j);
+                        cells.push(format!("{c}={j}"));
+                        continue;
+                    }
                     cells.push(format!("{c}={v:?}"));
                 }
                 Ok(cells.join(" "))

@@ -1,0 +1,143 @@
+//! DOR of one session folder with its own poses, scored against its labels,
+//! for tuning the evidence parameters without a store.
+//!
+//! ```text
+//! cargo run --release --example dor_probe -- SESSION_DIR [--set key=value ...] [--submap-kf 20]
+//! ```
+//!
+//! Poses: `gt/poses.txt` when the folder has one (a simulated session's true
+//! poses), else the layout's own (SemanticKITTI's). `--set` overrides
+//! `EvidenceConfig` fields by their TOML names (e.g. `--set alpha0=0.05
+//! --set model=log_odds`); several `--set` groups separated by `--vs` are run
+//! one after another on the same scans.
+
+use seam::eval::dor::{DorAccumulator, render_table};
+use seam::evidence::EvidenceConfig;
+use seam::evidence::session::{KeyframeInput, generate};
+use seam::io::{detect_session, is_moving_label, read_kitti_poses, read_labels, read_session_scan};
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Instant;
+
+fn main() -> ExitCode {
+    match run() {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn parse_cfg(sets: &[String]) -> Result<EvidenceConfig, String> {
+    let mut toml = String::new();
+    for s in sets {
+        let (k, v) = s.split_once('=').ok_or(format!("--set {s}: expected key=value"))?;
+        let v =
+            if v.parse::<f64>().is_ok() || v == "true" || v == "false" { v.to_string() } else { format!("\"{v}\"") };
+        if let Some((sec, key)) = k.split_once('.') {
+            toml.push_str(&format!("[{sec}]\n{key} = {v}\n"));
+        } else {
+            toml.insert_str(0, &format!("{k} = {v}\n"));
+        }
+    }
+    let cfg: EvidenceConfig = toml::from_str(&toml).map_err(|e| e.to_string())?;
+    cfg.validate()?;
+    Ok(cfg)
+}
+
+fn run() -> Result<(), String> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let dir = PathBuf::from(args.first().ok_or("usage: dor_probe SESSION_DIR [--set k=v ...] [--vs ...]")?);
+    let mut groups: Vec<Vec<String>> = vec![Vec::new()];
+    let mut submap_kf = 20usize;
+    let mut it = args[1..].iter();
+    while let Some(a) = it.next() {
+        match a.as_str() {
+            "--set" => groups.last_mut().unwrap().push(it.next().ok_or("--set needs key=value")?.clone()),
+            "--vs" => groups.push(Vec::new()),
+            "--submap-kf" => submap_kf = it.next().and_then(|v| v.parse().ok()).ok_or("--submap-kf N")?,
+            other => return Err(format!("unknown argument {other}")),
+        }
+    }
+    let src = detect_session(&dir).map_err(|e| e.to_string())?;
+    let gt = dir.join("gt/poses.txt");
+    let poses: Vec<_> = if gt.exists() {
+        read_kitti_poses(&gt).map_err(|e| e.to_string())?
+    } else {
+        src.keyframes.iter().map(|k| k.t_session_sensor).collect()
+    };
+    let mut scans = Vec::new();
+    let mut truth = Vec::new();
+    let mut classes: Vec<Vec<u16>> = Vec::new();
+    for (i, kf) in src.keyframes.iter().enumerate() {
+        let scan = read_session_scan(&src, i).map_err(|e| e.to_string())?;
+        let labels = match &kf.labels_path {
+            Some(p) => read_labels(p, scan.len()).map_err(|e| e.to_string())?,
+            None => return Err(format!("{}: keyframe {i} has no labels", dir.display())),
+        };
+        truth.push(labels.iter().map(|&l| is_moving_label(l)).collect::<Vec<bool>>());
+        classes.push(labels.iter().map(|&l| (l & 0xffff) as u16).collect());
+        scans.push(scan.points);
+    }
+    let points: usize = scans.iter().map(Vec::len).sum();
+    let dynamic: usize = truth.iter().flatten().filter(|&&d| d).count();
+    println!("{}: {} keyframes, {points} points, {dynamic} moving", dir.display(), scans.len());
+    for sets in groups {
+        let cfg = parse_cfg(&sets)?;
+        let inputs: Vec<KeyframeInput<'_>> = scans
+            .iter()
+            .enumerate()
+            .map(|(i, p)| KeyframeInput {
+                index: i as u32,
+                submap: i / submap_kf,
+                t_world_keyframe: poses[i],
+                points: p,
+            })
+            .collect();
+        let t = Instant::now();
+        let out = generate(&inputs, &[], &cfg, |_| {});
+        let secs = t.elapsed().as_secs_f64();
+        let mut acc = DorAccumulator::new(0.2);
+        let mut row = 0;
+        let mut by_class: std::collections::BTreeMap<u16, (usize, usize)> = Default::default();
+        for (i, p) in scans.iter().enumerate() {
+            for (j, q) in p.iter().enumerate() {
+                let e = by_class.entry(classes[i][j]).or_default();
+                e.0 += 1;
+                e.1 += out.labels.dynamic[row] as usize;
+                let w = poses[i] * nalgebra::Point3::new(q[0] as f64, q[1] as f64, q[2] as f64);
+                acc.add([w.x, w.y, w.z], truth[i][j], out.labels.dynamic[row]);
+                row += 1;
+            }
+        }
+        let s = acc.finish();
+        println!(
+            "\n[{}] {secs:.2} s ({:.0} points/s; ray casting {:.2} s), {} interest voxels, {} stored",
+            sets.join(" "),
+            points as f64 / secs,
+            out.stats.raycast_s,
+            out.stats.interest_voxels,
+            out.stats.generated_voxels
+        );
+        println!("{}", render_table(&s));
+        if std::env::var_os("DOR_HIST").is_some() {
+            let mut h = [[0usize; 10]; 2];
+            let mut row = 0;
+            for t in &truth {
+                for &d in t {
+                    let e = out.labels.eps_l[row];
+                    h[d as usize][((e * 10.0) as usize).min(9)] += 1;
+                    row += 1;
+                }
+            }
+            println!("  eps_l deciles, static : {:?}\n  eps_l deciles, dynamic: {:?}", h[0], h[1]);
+        }
+        if std::env::var_os("DOR_CLASSES").is_some() {
+            for (c, (n, r)) in &by_class {
+                println!("  class {c:>3}: {r:>7} of {n:>8} removed ({:.1} %)", 100.0 * *r as f64 / *n as f64);
+            }
+        }
+    }
+    Ok(())
+}

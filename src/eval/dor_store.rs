@@ -1,0 +1,126 @@
+//! `seam eval dor`: a stored session's DOR verdicts (or another tool's, as
+//! SemanticKITTI label files) scored against ground-truth labels, with the
+//! points placed by the store's current poses.
+
+use super::EvalError;
+use super::dor::{DOR_VOXEL_M, DorAccumulator, DorScores, moving_flags, read_keyframe_labels};
+use crate::align::maps::ScanLoader;
+use crate::store::evidence_files::read_point_labels;
+use crate::store::{self, Store};
+use nalgebra::Point3;
+use std::collections::HashMap;
+use std::path::Path;
+
+/// What `seam eval dor` prints.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct DorReport {
+    pub session: String,
+    /// `store` (the session's own labels) or the `--predicted` folder.
+    pub predicted: String,
+    pub model: Option<String>,
+    pub points: u64,
+    /// Wall time of the session's evidence step (ray casting, DOR, files).
+    pub evidence_s: Option<f64>,
+    pub points_per_s: Option<f64>,
+    pub scores: DorScores,
+}
+
+/// Scores the DOR of `session` (by name; the only session when `None`).
+pub fn dor_report(
+    store: &Store,
+    labels: &Path,
+    session: Option<&str>,
+    predicted: Option<&Path>,
+) -> Result<DorReport, EvalError> {
+    let conn = store.conn();
+    let sessions = store::sessions(conn)?;
+    let names = || sessions.iter().map(|s| s.name.as_str()).collect::<Vec<_>>().join(", ");
+    let row = match session {
+        Some(n) => sessions
+            .iter()
+            .find(|s| s.name == n)
+            .ok_or_else(|| EvalError::Mismatch(format!("no session named {n:?}; the store has: {}", names())))?,
+        None if sessions.len() == 1 => &sessions[0],
+        None => {
+            return Err(EvalError::Mismatch(format!(
+                "the store has {} sessions ({}); name one with --session",
+                sessions.len(),
+                names()
+            )));
+        }
+    };
+    let id = row.session_id;
+    let version = store::latest_graph_version(conn)?
+        .ok_or_else(|| EvalError::Mismatch(format!("session {} has no poses yet; finish its ingest", row.name)))?;
+    let poses: HashMap<i64, _> = store::world_poses(conn, version, id)?.into_iter().collect();
+    let keyframes = store::keyframes(conn, id)?;
+    let dor = store::session_dor(conn, id)?;
+    let own: Option<HashMap<i32, Vec<bool>>> = match predicted {
+        Some(_) => None,
+        None => {
+            let files = store::evidence_files(conn, id, "point_labels")?;
+            let f = files.last().ok_or_else(|| {
+                EvalError::Mismatch(format!(
+                    "session {} has no DOR labels; it was ingested before the evidence step existed or its ingest \
+                     did not finish (re-run `seam ingest`)",
+                    row.name
+                ))
+            })?;
+            let l = read_point_labels(&store.path_of(&f.rel_path))?;
+            let mut by_kf: HashMap<i32, Vec<bool>> = HashMap::new();
+            for i in 0..l.len() {
+                let v = by_kf.entry(l.keyframe[i]).or_default();
+                let j = l.point_index[i] as usize;
+                if v.len() <= j {
+                    v.resize(j + 1, false);
+                }
+                v[j] = l.dynamic[i];
+            }
+            Some(by_kf)
+        }
+    };
+    let loader = ScanLoader::new(store)?;
+    let mut acc = DorAccumulator::new(DOR_VOXEL_M);
+    for kf in &keyframes {
+        let scan = loader.load(kf)?;
+        let n = scan.points.len();
+        let truth = moving_flags(&read_keyframe_labels(labels, kf.keyframe_index as u64, n)?);
+        let removed = match (&own, predicted) {
+            (Some(by_kf), _) => {
+                let mut v = by_kf.get(&(kf.keyframe_index as i32)).cloned().unwrap_or_default();
+                if v.len() != n {
+                    return Err(EvalError::Mismatch(format!(
+                        "keyframe {} of session {} has {n} points but {} stored labels; the store is damaged (run \
+                         `seam check`)",
+                        kf.keyframe_index,
+                        row.name,
+                        v.len()
+                    )));
+                }
+                std::mem::take(&mut v)
+            }
+            (None, Some(dir)) => moving_flags(&read_keyframe_labels(dir, kf.keyframe_index as u64, n)?),
+            (None, None) => unreachable!("labels come from the store or from --predicted"),
+        };
+        let pose = poses.get(&kf.keyframe_index).ok_or_else(|| {
+            EvalError::Mismatch(format!(
+                "keyframe {} of {} has no pose in version {version}",
+                kf.keyframe_index, row.name
+            ))
+        })?;
+        let world: Vec<[f64; 3]> =
+            scan.points.iter().map(|p| (pose * Point3::new(p[0] as f64, p[1] as f64, p[2] as f64)).into()).collect();
+        acc.add_scan(&world, &truth, &removed)?;
+    }
+    let points = acc.points();
+    let step_s = store::steps(conn, id)?.into_iter().find(|s| s.step == "evidence").map(|s| s.wall_s);
+    Ok(DorReport {
+        session: row.name.clone(),
+        predicted: predicted.map_or("store".into(), |p| p.display().to_string()),
+        model: dor.map(|d| d.model),
+        points,
+        evidence_s: step_s,
+        points_per_s: step_s.filter(|s| *s > 0.0).map(|s| points as f64 / s),
+        scores: acc.finish(),
+    })
+}

@@ -1,0 +1,154 @@
+//! Step `evidence` (MATH.md §6-7): ray cast the new session on the graph
+//! version `optimize` just committed, remove its movers, store its evidence,
+//! cleaned maps and point labels, and reproject every earlier session's
+//! stored evidence to that version (nothing earlier is ray cast again).
+//!
+//! Files, all immutable and recorded in `evidence_files` with the graph
+//! version they were generated from:
+//! - `data/evidence/s<session>/m<submap>_v<version>.parquet`: per submap
+//! - `data/cleaned/s<session>/m<submap>_v<version>.parquet`: per submap
+//! - `data/labels/s<session>_v<version>.parquet`: every point's verdict
+
+use super::IngestError;
+use super::steps::{StepCtx, alignment_state};
+use crate::align::maps::ScanLoader;
+use crate::evidence::session::{self, KeyframeInput, delta, reproject, reproject_cleaned};
+use crate::evidence::{EvidenceModel, SubmapEvidence};
+use crate::geometry::Pose;
+use crate::store::evidence_files::{
+    read_cleaned_map, read_submap_evidence, write_cleaned_map, write_point_labels, write_submap_evidence,
+};
+use crate::store::{self, FileRecord, SubmapId};
+use rayon::prelude::*;
+use serde_json::{Value, json};
+use std::collections::HashMap;
+use std::time::Instant;
+
+pub(super) fn evidence(ctx: &mut StepCtx<'_>, step: &'static str, seq: i64) -> Result<Value, IngestError> {
+    let started_at = store::now_utc();
+    let t0 = Instant::now();
+    let session = ctx.session()?;
+    let cfg = &ctx.config.evidence;
+    let version = store::latest_graph_version(ctx.store.conn())?.ok_or_else(|| store::StoreError::Corrupt {
+        path: ctx.store.root().to_path_buf(),
+        message: "the evidence step found no graph version; optimize must run first".into(),
+    })?;
+    let (sessions, new) = alignment_state(ctx)?;
+    let state = &sessions[new];
+
+    // The new session's scans, read in parallel, and its submap ordinals.
+    let submaps = store::submaps(ctx.store.conn(), session)?;
+    let ordinal: HashMap<SubmapId, usize> = submaps.iter().map(|s| (s.submap_id, s.submap_index as usize)).collect();
+    let loader = ScanLoader::new(ctx.store)?;
+    ctx.progress.begin("read scans", state.keyframes.len() as u64);
+    let scans = state
+        .keyframes
+        .par_iter()
+        .map(|k| {
+            let s = loader.load(&k.row).map(|s| s.points);
+            ctx.progress.advance(1);
+            s
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    ctx.progress.end();
+    let inputs: Vec<KeyframeInput<'_>> = state
+        .keyframes
+        .iter()
+        .zip(&scans)
+        .map(|(k, pts)| KeyframeInput {
+            index: k.row.keyframe_index as u32,
+            submap: k.row.submap_id.and_then(|id| ordinal.get(&id).copied()).unwrap_or(0),
+            t_world_keyframe: k.t_world_keyframe,
+            points: pts,
+        })
+        .collect();
+    ctx.progress.begin("ray cast", inputs.len() as u64);
+    let out = session::generate(&inputs, &[], cfg, |_| ctx.progress.advance(1));
+    ctx.progress.end();
+    drop(inputs);
+    drop(scans);
+
+    // Earlier sessions: reproject their stored evidence and cleaned maps.
+    let t_re = Instant::now();
+    let mut reprojected_voxels = 0usize;
+    let mut reprojected_rows = 0usize;
+    let mut reprojected_cleaned = 0usize;
+    for earlier in sessions.iter().filter(|s| s.id() != session) {
+        let conn = ctx.store.conn();
+        let files = store::evidence_files(conn, earlier.id(), "evidence")?;
+        if files.is_empty() {
+            continue;
+        }
+        let now: HashMap<u32, Pose> =
+            earlier.keyframes.iter().map(|k| (k.row.keyframe_index as u32, k.t_world_keyframe)).collect();
+        let mut gen_poses: HashMap<i64, HashMap<u32, Pose>> = HashMap::new();
+        for f in &files {
+            if let std::collections::hash_map::Entry::Vacant(v) = gen_poses.entry(f.graph_version) {
+                let poses = store::world_poses(conn, f.graph_version, earlier.id())?;
+                v.insert(poses.into_iter().map(|(i, p)| (i as u32, p)).collect());
+            }
+        }
+        let paths: Vec<(i64, std::path::PathBuf)> =
+            files.iter().map(|f| (f.graph_version, ctx.store.path_of(&f.rel_path))).collect();
+        let tables: Vec<(i64, SubmapEvidence)> =
+            paths.par_iter().map(|(g, p)| read_submap_evidence(p).map(|t| (*g, t))).collect::<Result<_, _>>()?;
+        // Files of one session share a generation version (one ingest).
+        let g = tables.first().map(|t| t.0).unwrap_or(version);
+        let at_gen = &gen_poses[&g];
+        let delta_of = |kf: u32| Some(delta(at_gen.get(&kf)?, now.get(&kf)?));
+        let refs: Vec<&SubmapEvidence> = tables.iter().map(|t| &t.1).collect();
+        reprojected_rows += refs.iter().map(|t| t.len()).sum::<usize>();
+        reprojected_voxels += reproject(&refs, cfg.voxel_size_m, delta_of).len();
+        for f in store::evidence_files(conn, earlier.id(), "cleaned_map")? {
+            let m = read_cleaned_map(&ctx.store.path_of(&f.rel_path))?;
+            reprojected_cleaned += reproject_cleaned(&m, delta_of).len();
+        }
+    }
+    let reproject_s = t_re.elapsed().as_secs_f64();
+
+    // Publish the files, then record them with the step in one transaction.
+    let mut published: Vec<(FileRecord, Option<SubmapId>, usize)> = Vec::new();
+    let by_ordinal: HashMap<usize, SubmapId> = ordinal.iter().map(|(id, o)| (*o, *id)).collect();
+    for (o, table) in out.submaps.iter().enumerate() {
+        let rel = format!("data/evidence/s{:04}/m{o:04}_v{version}.parquet", session.0);
+        published.push((write_submap_evidence(ctx.store, &rel, table)?, by_ordinal.get(&o).copied(), table.len()));
+    }
+    for (o, map) in out.cleaned.iter().enumerate() {
+        let rel = format!("data/cleaned/s{:04}/m{o:04}_v{version}.parquet", session.0);
+        published.push((write_cleaned_map(ctx.store, &rel, map)?, by_ordinal.get(&o).copied(), map.len()));
+    }
+    let rel = format!("data/labels/s{:04}_v{version}.parquet", session.0);
+    published.push((write_point_labels(ctx.store, &rel, &out.labels)?, None, out.labels.len()));
+
+    let model = match cfg.model {
+        EvidenceModel::Directional => "directional",
+        EvidenceModel::LogOdds => "log_odds",
+    };
+    let st = &out.stats;
+    let details = json!({
+        "graph_version": version,
+        "model": model,
+        "points": st.points,
+        "dynamic_points": st.dynamic_points,
+        "interest_voxels": st.interest_voxels,
+        "generated_voxels": st.generated_voxels,
+        "dynamic_voxels": st.dynamic_voxels,
+        "cleaned_voxels": st.cleaned_voxels,
+        "skipped_rays": st.skipped_rays,
+        "raycast_s": st.raycast_s,
+        "generate_s": st.total_s,
+        "reprojected_rows": reprojected_rows,
+        "reprojected_voxels": reprojected_voxels,
+        "reprojected_cleaned_points": reprojected_cleaned,
+        "reproject_s": reproject_s,
+    });
+    let root = ctx.store.root().to_path_buf();
+    ctx.commit(step, seq, (&started_at, t0), |tx| {
+        for (rec, submap, rows) in &published {
+            let id = store::insert_file(tx, &root, rec, Some(session.0))?;
+            store::insert_evidence_file(tx, id, session, *submap, &rec.kind, version, *rows)?;
+        }
+        store::insert_session_dor(tx, session, version, model, st)?;
+        Ok((session, details))
+    })
+}
