@@ -4,7 +4,6 @@
 use crate::geometry::{Pose, Scan};
 use crate::registration::downsample::voxel_downsample;
 use crate::store::{self, KeyframeRow, Store, StoreError};
-use nalgebra::Point3;
 use rayon::prelude::*;
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -34,10 +33,7 @@ impl ScanLoader {
     }
 }
 
-/// `t * p` for every point, in `f64`.
-pub fn transformed(points: &[[f32; 3]], t: &Pose) -> Vec<[f64; 3]> {
-    points.iter().map(|p| (t * Point3::new(p[0] as f64, p[1] as f64, p[2] as f64)).into()).collect()
-}
+pub use crate::geometry::transformed;
 
 /// Keyframes per parallel batch when merging maps: bounds memory to about
 /// this many scans at once.

@@ -68,22 +68,6 @@ pub fn label_path(dir: &Path, index: u64) -> PathBuf {
     labels_dir(dir).join(format!("{index:06}.label"))
 }
 
-/// Reads a `.label` file: one little-endian u32 per point. A size that is not
-/// a multiple of 4 bytes is an error naming the file.
-pub fn read_label_file(path: &Path) -> Result<Vec<u32>, EvalError> {
-    let bytes = std::fs::read(path).map_err(|e| ReadError::io(path, &e))?;
-    if !bytes.len().is_multiple_of(4) {
-        return Err(ReadError::new(
-            ReadErrorKind::Parse,
-            path,
-            format!("label file has {} bytes, not a multiple of 4 (one uint32 per point)", bytes.len()),
-        )
-        .hint("is it a SemanticKITTI .label file? Re-export it, or point --labels at the right folder")
-        .into());
-    }
-    Ok(bytes.as_chunks::<4>().0.iter().map(|b| u32::from_le_bytes(*b)).collect())
-}
-
 /// Reads the labels of keyframe `index` from `DIR/labels/NNNNNN.label` and
 /// checks there is one per point of its scan (`expected_points`).
 pub fn read_keyframe_labels(dir: &Path, index: u64, expected_points: usize) -> Result<Vec<u32>, EvalError> {
@@ -96,17 +80,7 @@ pub fn read_keyframe_labels(dir: &Path, index: u64, expected_points: usize) -> R
             ))
             .into());
     }
-    let labels = read_label_file(&path)?;
-    if labels.len() != expected_points {
-        return Err(ReadError::new(
-            ReadErrorKind::CountMismatch,
-            &path,
-            format!("{} labels, but keyframe {index} has {expected_points} points", labels.len()),
-        )
-        .hint("labels must be one uint32 per point of the scan with the same index; is it the right sequence?")
-        .into());
-    }
-    Ok(labels)
+    Ok(crate::io::read_labels(&path, expected_points)?)
 }
 
 /// The moving-class flag of each label ([`is_moving_label`]).
@@ -552,7 +526,6 @@ mod tests {
         assert!(p.ends_with("labels/000007.label"));
         let labels: Vec<u32> = vec![252 | (3 << 16), 40, 259];
         std::fs::write(&p, labels.iter().flat_map(|v| v.to_le_bytes()).collect::<Vec<u8>>()).unwrap();
-        assert_eq!(read_label_file(&p).unwrap(), labels);
         assert_eq!(read_keyframe_labels(dir.path(), 7, 3).unwrap(), labels);
         assert_eq!(moving_flags(&labels), vec![true, false, true]);
         let e = read_keyframe_labels(dir.path(), 7, 4).unwrap_err().to_string();
@@ -560,7 +533,7 @@ mod tests {
         let e = read_keyframe_labels(dir.path(), 8, 3).unwrap_err().to_string();
         assert!(e.contains("000008.label") && e.contains("hint"), "{e}");
         std::fs::write(&p, [0u8; 6]).unwrap();
-        let e = read_label_file(&p).unwrap_err().to_string();
+        let e = read_keyframe_labels(dir.path(), 7, 1).unwrap_err().to_string();
         assert!(e.contains("000007.label") && e.contains("6 bytes") && e.contains("multiple of 4"), "{e}");
     }
 

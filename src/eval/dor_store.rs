@@ -5,9 +5,9 @@
 use super::EvalError;
 use super::dor::{DOR_VOXEL_M, DorAccumulator, DorScores, moving_flags, read_keyframe_labels};
 use crate::align::maps::ScanLoader;
+use crate::geometry::transformed;
 use crate::store::evidence_files::read_point_labels;
 use crate::store::{self, Store};
-use nalgebra::Point3;
 use std::collections::HashMap;
 use std::path::Path;
 
@@ -55,8 +55,9 @@ pub fn dor_report(
     let poses: HashMap<i64, _> = store::world_poses(conn, version, id)?.into_iter().collect();
     let keyframes = store::keyframes(conn, id)?;
     let dor = store::session_dor(conn, id)?;
-    let own: Option<HashMap<i32, Vec<bool>>> = match predicted {
-        Some(_) => None,
+    // The store's own verdicts by keyframe (empty when scoring `--predicted`).
+    let mut own: HashMap<i32, Vec<bool>> = match predicted {
+        Some(_) => HashMap::new(),
         None => {
             let files = store::evidence_files(conn, id, "point_labels")?;
             let f = files.last().ok_or_else(|| {
@@ -76,7 +77,7 @@ pub fn dor_report(
                 }
                 v[j] = l.dynamic[i];
             }
-            Some(by_kf)
+            by_kf
         }
     };
     let loader = ScanLoader::new(store)?;
@@ -85,9 +86,10 @@ pub fn dor_report(
         let scan = loader.load(kf)?;
         let n = scan.points.len();
         let truth = moving_flags(&read_keyframe_labels(labels, kf.keyframe_index as u64, n)?);
-        let removed = match (&own, predicted) {
-            (Some(by_kf), _) => {
-                let mut v = by_kf.get(&(kf.keyframe_index as i32)).cloned().unwrap_or_default();
+        let removed = match predicted {
+            Some(dir) => moving_flags(&read_keyframe_labels(dir, kf.keyframe_index as u64, n)?),
+            None => {
+                let v = own.remove(&(kf.keyframe_index as i32)).unwrap_or_default();
                 if v.len() != n {
                     return Err(EvalError::Mismatch(format!(
                         "keyframe {} of session {} has {n} points but {} stored labels; the store is damaged (run \
@@ -97,10 +99,8 @@ pub fn dor_report(
                         v.len()
                     )));
                 }
-                std::mem::take(&mut v)
+                v
             }
-            (None, Some(dir)) => moving_flags(&read_keyframe_labels(dir, kf.keyframe_index as u64, n)?),
-            (None, None) => unreachable!("labels come from the store or from --predicted"),
         };
         let pose = poses.get(&kf.keyframe_index).ok_or_else(|| {
             EvalError::Mismatch(format!(
@@ -108,9 +108,7 @@ pub fn dor_report(
                 kf.keyframe_index, row.name
             ))
         })?;
-        let world: Vec<[f64; 3]> =
-            scan.points.iter().map(|p| (pose * Point3::new(p[0] as f64, p[1] as f64, p[2] as f64)).into()).collect();
-        acc.add_scan(&world, &truth, &removed)?;
+        acc.add_scan(&transformed(&scan.points, pose), &truth, &removed)?;
     }
     let points = acc.points();
     let step_s = store::steps(conn, id)?.into_iter().find(|s| s.step == "evidence").map(|s| s.wall_s);

@@ -12,7 +12,7 @@ pub mod dor;
 mod dor_store;
 pub use dor_store::{DorReport, dor_report};
 
-pub use dor::{DorAccumulator, DorBlock, DorScores, is_moving_label, read_label_file, render_table};
+pub use dor::{DorAccumulator, DorBlock, DorScores, is_moving_label, render_table};
 
 use crate::align::{self as alignment, SessionState, graph};
 use crate::geometry::Pose;

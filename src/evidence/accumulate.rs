@@ -1,4 +1,7 @@
-//! One keyframe's rays into the evidence map (MATH.md §6, eq. 4).
+//! One keyframe's rays into a hash map of every voxel they touch (MATH.md
+//! §6, eq. 4). The pipeline keeps evidence on an interest set instead
+//! ([`super::grid`]); this full map is the reference that version is tested
+//! against, and what `examples/raycast_bench` times.
 //!
 //! Two passes, so that a voxel counts at most once per keyframe and kind:
 //! 1. cast every ray and mark each voxel it touches as hit and/or free in a
@@ -10,19 +13,16 @@
 //! Because pass 2 adds one term per voxel and kind regardless of how the rays
 //! were split, the parallel and serial versions give bit-identical maps.
 
+use super::grid::{Box3, FREE, HIT, Marks};
 use super::raycast::{cast_ray, voxel_key};
 use super::stats::{EvidenceConfig, VoxelEvidence};
 use crate::geometry::VoxelKey;
 use rayon::prelude::*;
 use rustc_hash::FxHashMap;
-use std::sync::atomic::{AtomicU64, Ordering};
 
 /// Evidence per voxel, for the keyframes of one submap in the frame they
 /// were given in.
 pub type EvidenceMap = FxHashMap<VoxelKey, VoxelEvidence>;
-
-const HIT: u8 = 1;
-const FREE: u8 = 2;
 
 /// Dense marks cover at most this many voxels (2 bits each: 16 MiB); a
 /// keyframe whose key box is larger falls back to a hash set.
@@ -42,7 +42,7 @@ pub struct KeyframeEvidence {
 }
 
 /// Casts one ray, calling `mark(key, HIT or FREE)`; false when skipped.
-fn mark_ray(origin_m: &[f64; 3], point_m: &[f64; 3], voxel_m: f64, mut mark: impl FnMut(VoxelKey, u8)) -> bool {
+fn mark_ray(origin_m: &[f64; 3], point_m: &[f64; 3], voxel_m: f64, mut mark: impl FnMut(VoxelKey, u64)) -> bool {
     let hit = cast_ray(origin_m, point_m, voxel_m, |k| mark(k, FREE));
     if let Some(k) = hit {
         mark(k, HIT);
@@ -50,74 +50,17 @@ fn mark_ray(origin_m: &[f64; 3], point_m: &[f64; 3], voxel_m: f64, mut mark: imp
     hit.is_some()
 }
 
-/// The per-keyframe set `{voxel → hit/free}` as 2 bits per voxel of the key
-/// box spanned by the sensor and the points: a ray's walk never leaves the
-/// box of its two end keys. Shared between threads through atomic `or`s,
-/// which commute, so the marks do not depend on the order rays are cast in.
-struct DenseMarks {
-    lo: [i64; 3],
-    dims: [u64; 3],
-    words: Vec<AtomicU64>,
-}
-
-impl DenseMarks {
-    /// `None` when the sensor's key is invalid or the box is too large.
-    fn covering(origin_m: &[f64; 3], points_m: &[[f64; 3]], voxel_m: f64) -> Option<DenseMarks> {
-        let o = voxel_key(origin_m, voxel_m)?.0.map(i64::from);
-        let (mut lo, mut hi) = (o, o);
-        for k in points_m.iter().filter_map(|p| voxel_key(p, voxel_m)) {
-            for a in 0..3 {
-                lo[a] = lo[a].min(k.0[a] as i64);
-                hi[a] = hi[a].max(k.0[a] as i64);
-            }
-        }
-        let dims = [0, 1, 2].map(|a| (hi[a] - lo[a] + 1) as u64);
-        let volume = dims[0].checked_mul(dims[1])?.checked_mul(dims[2])?;
-        if volume > DENSE_MAX_VOXELS {
-            return None;
-        }
-        let words = (0..volume.div_ceil(32)).map(|_| AtomicU64::new(0)).collect();
-        Some(DenseMarks { lo, dims, words })
-    }
-
-    fn mark(&self, k: VoxelKey, kind: u8) {
-        let [x, y, z] = [0, 1, 2].map(|a| (k.0[a] as i64 - self.lo[a]) as u64);
-        let i = (z * self.dims[1] + y) * self.dims[0] + x;
-        let word = &self.words[(i / 32) as usize];
-        let bits = (kind as u64) << (2 * (i % 32));
-        // Voxels near the sensor are marked by most rays: reading first keeps
-        // their cache line shared instead of bouncing between cores.
-        if word.load(Ordering::Relaxed) & bits != bits {
-            word.fetch_or(bits, Ordering::Relaxed);
-        }
-    }
-
-    /// Marked voxels, for `HashMap::reserve`.
-    fn count(&self) -> usize {
-        let pairs = |w: u64| ((w | (w >> 1)) & 0x5555_5555_5555_5555).count_ones() as usize;
-        self.words.iter().map(|w| pairs(w.load(Ordering::Relaxed))).sum()
-    }
-
-    fn iter(&self) -> impl Iterator<Item = (VoxelKey, u8)> + '_ {
-        let [dx, dy, _] = self.dims;
-        self.words.iter().enumerate().flat_map(move |(wi, w)| {
-            let w = w.load(Ordering::Relaxed);
-            (0..32u64).filter_map(move |j| {
-                let kinds = ((w >> (2 * j)) & 3) as u8;
-                (kinds != 0).then(|| {
-                    let i = wi as u64 * 32 + j;
-                    let (x, y, z) = (i % dx, (i / dx) % dy, i / (dx * dy));
-                    let [lx, ly, lz] = self.lo;
-                    let k = [x as i64 + lx, y as i64 + ly, z as i64 + lz].map(|c| c as i32);
-                    (VoxelKey(k), kinds)
-                })
-            })
-        })
-    }
+/// The per-keyframe set `{voxel → hit/free}` as [`Marks`] over the key box
+/// spanned by the sensor and the points (a ray's walk never leaves the box
+/// of its two end keys); `None` when the box is too large.
+fn dense_marks(origin_m: &[f64; 3], points_m: &[[f64; 3]], voxel_m: f64) -> Option<Marks> {
+    voxel_key(origin_m, voxel_m)?;
+    let b = Box3::of_rays(origin_m, points_m, voxel_m);
+    (b.volume() <= DENSE_MAX_VOXELS).then(|| Marks::new(b))
 }
 
 /// The hash-set fallback for keyframes whose key box is too large.
-type SparseMarks = FxHashMap<VoxelKey, u8>;
+type SparseMarks = FxHashMap<VoxelKey, u64>;
 
 /// Adds one keyframe's rays, sensor at `origin_world` and points
 /// `points_world` (any common frame: seam uses the submap frame), to `map`.
@@ -132,7 +75,7 @@ pub fn accumulate_keyframe(
 ) -> KeyframeEvidence {
     let v = cfg.voxel_size_m;
     let mut cast = 0;
-    if let Some(dense) = DenseMarks::covering(origin_world, points_world, v) {
+    if let Some(dense) = dense_marks(origin_world, points_world, v) {
         for p in points_world {
             cast += mark_ray(origin_world, p, v, |k, kind| dense.mark(k, kind)) as usize;
         }
@@ -159,7 +102,7 @@ pub fn accumulate_keyframe_par(
 ) -> KeyframeEvidence {
     let v = cfg.voxel_size_m;
     let rays = points_world.par_iter().with_min_len(1024);
-    if let Some(dense) = DenseMarks::covering(origin_world, points_world, v) {
+    if let Some(dense) = dense_marks(origin_world, points_world, v) {
         let cast = rays.map(|p| mark_ray(origin_world, p, v, |k, kind| dense.mark(k, kind)) as usize).sum();
         reserve(map, dense.count());
         apply(origin_world, dense.iter(), points_world.len(), cast, keyframe, cfg, map)
@@ -197,7 +140,7 @@ fn merge_marks((a, ca): (SparseMarks, usize), (b, cb): (SparseMarks, usize)) -> 
 /// Pass 2: eq. 4 once per marked voxel and kind.
 fn apply(
     origin_m: &[f64; 3],
-    marks: impl Iterator<Item = (VoxelKey, u8)>,
+    marks: impl Iterator<Item = (VoxelKey, u64)>,
     rays: usize,
     cast: usize,
     keyframe: u32,

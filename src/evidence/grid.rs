@@ -31,8 +31,8 @@ use std::sync::atomic::{AtomicU64, Ordering};
 /// not walls seen level, whose rays would otherwise lose every free voxel.
 const CLEARANCE_MIN_DROP_M: f64 = 0.5;
 
-const HIT: u64 = 1;
-const FREE: u64 = 2;
+pub(super) const HIT: u64 = 1;
+pub(super) const FREE: u64 = 2;
 
 /// Bits per key axis in a packed key; keys span ±2^20 voxels (±210 km at 0.2 m).
 const AXIS_BITS: u32 = 21;
@@ -110,7 +110,7 @@ impl Box3 {
         [0, 1, 2].map(|a| (self.hi[a] as i64 - self.lo[a] as i64 + 1).max(0) as u64)
     }
 
-    fn volume(&self) -> u64 {
+    pub(super) fn volume(&self) -> u64 {
         let [x, y, z] = self.dims();
         x.saturating_mul(y).saturating_mul(z)
     }
@@ -145,14 +145,14 @@ impl Box3 {
 }
 
 /// 2 bits per voxel of a box, set through atomic `or`s.
-struct Marks {
+pub(super) struct Marks {
     b: Box3,
     dims: [u64; 3],
     words: Box<[AtomicU64]>,
 }
 
 impl Marks {
-    fn new(b: Box3) -> Marks {
+    pub(super) fn new(b: Box3) -> Marks {
         let dims = b.dims();
         let n = (b.volume().div_ceil(32)) as usize;
         Marks { b, dims, words: zeroed_atomics(n) }
@@ -165,7 +165,7 @@ impl Marks {
     }
 
     #[inline]
-    fn mark(&self, k: VoxelKey, kind: u64) {
+    pub(super) fn mark(&self, k: VoxelKey, kind: u64) {
         if !self.b.contains(&k.0) {
             return;
         }
@@ -202,6 +202,30 @@ impl Marks {
     fn get(&self, k: &[i32; 3]) -> u64 {
         let i = self.index(k);
         (self.words[(i / 32) as usize].load(Ordering::Relaxed) >> (2 * (i % 32))) & 3
+    }
+
+    /// Marked voxels, for `HashMap::reserve`.
+    pub(super) fn count(&self) -> usize {
+        let pairs = |w: u64| ((w | (w >> 1)) & 0x5555_5555_5555_5555).count_ones() as usize;
+        self.words.iter().map(|w| pairs(w.load(Ordering::Relaxed))).sum()
+    }
+
+    /// Every marked voxel with its kinds, in index order.
+    pub(super) fn iter(&self) -> impl Iterator<Item = (VoxelKey, u64)> + '_ {
+        let [dx, dy, _] = self.dims;
+        self.words.iter().enumerate().flat_map(move |(wi, w)| {
+            let w = w.load(Ordering::Relaxed);
+            (0..32u64).filter_map(move |j| {
+                let kinds = (w >> (2 * j)) & 3;
+                (kinds != 0).then(|| {
+                    let i = wi as u64 * 32 + j;
+                    let (x, y, z) = (i % dx, (i / dx) % dy, i / (dx * dy));
+                    let [lx, ly, lz] = self.b.lo.map(i64::from);
+                    let k = [x as i64 + lx, y as i64 + ly, z as i64 + lz].map(|c| c as i32);
+                    (VoxelKey(k), kinds)
+                })
+            })
+        })
     }
 }
 
@@ -261,9 +285,16 @@ impl Row {
             self.hit_m[a] += o.hit_m[a];
             self.free_m[a] += o.free_m[a];
         }
-        if o.owner_q > self.owner_q || (o.owner_q == self.owner_q && o.owner_keyframe < self.owner_keyframe) {
-            self.owner_keyframe = o.owner_keyframe;
-            self.owner_q = o.owner_q;
+        self.offer_owner(o.owner_keyframe, o.owner_q);
+    }
+
+    /// Keeps the keyframe with the larger contribution as the owner; ties go
+    /// to the lower index, so the owner does not depend on merge order.
+    #[inline]
+    fn offer_owner(&mut self, keyframe: u32, q: f32) {
+        if q > self.owner_q || (q == self.owner_q && keyframe < self.owner_keyframe) {
+            self.owner_keyframe = keyframe;
+            self.owner_q = q;
         }
     }
 
@@ -319,6 +350,11 @@ impl InterestEvidence {
     pub fn new(mut keys: Vec<u64>, voxel_m: f64) -> InterestEvidence {
         keys.par_sort_unstable();
         keys.dedup();
+        Self::on_sorted(keys, voxel_m)
+    }
+
+    /// Empty evidence on keys already sorted and unique.
+    fn on_sorted(keys: Vec<u64>, voxel_m: f64) -> InterestEvidence {
         let mut bounds = Box3::EMPTY;
         for &k in &keys {
             bounds.add(unpack(k));
@@ -358,21 +394,7 @@ impl InterestEvidence {
         let (lo, hi) = self.x_range(b);
         let (keys, idx): (Vec<u64>, Vec<u32>) =
             (lo..hi).filter(|&i| b.contains(&unpack(self.keys[i]).0)).map(|i| (self.keys[i], i as u32)).unzip();
-        let n = keys.len();
-        let mut bounds = Box3::EMPTY;
-        for &k in &keys {
-            bounds.add(unpack(k));
-        }
-        (
-            InterestEvidence {
-                voxel_m: self.voxel_m,
-                keys,
-                rows: vec![Row::default(); n],
-                log_odds: vec![0.0; n],
-                bounds,
-            },
-            idx,
-        )
+        (Self::on_sorted(keys, self.voxel_m), idx)
     }
 
     /// Indices of the keys whose x lies in the box's x range.
@@ -479,11 +501,7 @@ impl InterestEvidence {
                 if kinds & FREE != 0 {
                     Row::add(&mut row.free_n, &mut row.free_q, &mut row.free_m, q, u);
                 }
-                let total = q * kinds.count_ones() as f32;
-                if total > row.owner_q || (total == row.owner_q && keyframe < row.owner_keyframe) {
-                    row.owner_q = total;
-                    row.owner_keyframe = keyframe;
-                }
+                row.offer_owner(keyframe, q * kinds.count_ones() as f32);
                 hit_free.fetch_add(((kinds & HIT) << 32) | ((kinds & FREE) >> 1), Ordering::Relaxed);
             });
         let hf = hit_free.into_inner();

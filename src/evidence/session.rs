@@ -25,7 +25,7 @@
 use super::grid::{Box3, InterestEvidence, RayStats, Row, eps_of, pack, packed_key, row_of, unpack};
 use super::stats::EvidenceConfig;
 use super::tables::{CleanedMap, PointLabels, SubmapEvidence};
-use crate::geometry::{Pose, VoxelKey};
+use crate::geometry::{Pose, VoxelKey, transformed};
 use nalgebra::Point3;
 use rayon::prelude::*;
 use rustc_hash::FxHashMap;
@@ -73,8 +73,7 @@ pub struct GenerationStats {
 }
 
 fn world_points(kf: &KeyframeInput<'_>) -> Vec<[f64; 3]> {
-    let t = &kf.t_world_keyframe;
-    kf.points.iter().map(|p| (t * Point3::new(p[0] as f64, p[1] as f64, p[2] as f64)).into()).collect()
+    transformed(kf.points, &kf.t_world_keyframe)
 }
 
 fn origin(kf: &KeyframeInput<'_>) -> [f64; 3] {
@@ -449,11 +448,6 @@ pub fn check_reprojection(inputs: &[KeyframeInput<'_>], poses_now: &[Pose], cfg:
     out.match_fraction = out.same_voxel_and_verdict as f64 / total;
     out.neighbour_match_fraction = near as f64 / total;
     out
-}
-
-/// The voxel key of a packed key (for callers outside `evidence`).
-pub fn key_of(packed: u64) -> VoxelKey {
-    unpack(packed)
 }
 
 #[cfg(test)]

@@ -16,6 +16,11 @@ pub use pose::{
 };
 pub use voxel::VoxelKey;
 
+/// `t * p` for every (f32) point, in `f64`: a scan moved into another frame.
+pub fn transformed(points: &[[f32; 3]], t: &Pose) -> Vec<[f64; 3]> {
+    points.iter().map(|p| (t * nalgebra::Point3::new(p[0] as f64, p[1] as f64, p[2] as f64)).into()).collect()
+}
+
 /// A single LiDAR scan in its sensor frame.
 ///
 /// `intensity` is either empty (the format had none) or as long as `points`.

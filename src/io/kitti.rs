@@ -41,10 +41,19 @@ pub(crate) fn parse_bin(path: &Path, bytes: &[u8]) -> Result<Scan, ReadError> {
 /// Reads a SemanticKITTI `.label` file: one little-endian u32 per point,
 /// class in the low 16 bits, instance in the high 16.
 ///
-/// A size other than `4 × expected_points` is `CountMismatch`.
+/// A size that is not a multiple of 4 is `Parse`; a size other than
+/// `4 × expected_points` is `CountMismatch`.
 pub fn read_labels(path: &Path, expected_points: usize) -> Result<Vec<u32>, ReadError> {
     let bytes = read_bytes(path)?;
-    if !bytes.len().is_multiple_of(4) || bytes.len() / 4 != expected_points {
+    if !bytes.len().is_multiple_of(4) {
+        return Err(ReadError::new(
+            ReadErrorKind::Parse,
+            path,
+            format!("label file has {} bytes, not a multiple of 4 (one uint32 per point)", bytes.len()),
+        )
+        .hint("is it a SemanticKITTI .label file? Re-export it, or point at the right folder"));
+    }
+    if bytes.len() / 4 != expected_points {
         return Err(ReadError::new(
             ReadErrorKind::CountMismatch,
             path,

@@ -76,32 +76,36 @@ pub(super) fn evidence(ctx: &mut StepCtx<'_>, step: &'static str, seq: i64) -> R
     for earlier in sessions.iter().filter(|s| s.id() != session) {
         let conn = ctx.store.conn();
         let files = store::evidence_files(conn, earlier.id(), "evidence")?;
-        if files.is_empty() {
-            continue;
-        }
+        let cleaned = store::evidence_files(conn, earlier.id(), "cleaned_map")?;
         let now: HashMap<u32, Pose> =
             earlier.keyframes.iter().map(|k| (k.row.keyframe_index as u32, k.t_world_keyframe)).collect();
-        let mut gen_poses: HashMap<i64, HashMap<u32, Pose>> = HashMap::new();
-        for f in &files {
-            if let std::collections::hash_map::Entry::Vacant(v) = gen_poses.entry(f.graph_version) {
-                let poses = store::world_poses(conn, f.graph_version, earlier.id())?;
-                v.insert(poses.into_iter().map(|(i, p)| (i as u32, p)).collect());
+        // ΔT_i = W_now,i · W_gen,i⁻¹ of every keyframe, for each graph version
+        // some file of this session was generated from (eq. 10).
+        let mut deltas: HashMap<i64, HashMap<u32, Pose>> = HashMap::new();
+        for g in files.iter().chain(&cleaned).map(|f| f.graph_version) {
+            if let std::collections::hash_map::Entry::Vacant(v) = deltas.entry(g) {
+                let at_gen = store::world_poses(conn, g, earlier.id())?;
+                v.insert(
+                    at_gen
+                        .into_iter()
+                        .filter_map(|(i, p)| Some((i as u32, delta(&p, now.get(&(i as u32))?))))
+                        .collect(),
+                );
             }
         }
-        let paths: Vec<(i64, std::path::PathBuf)> =
-            files.iter().map(|f| (f.graph_version, ctx.store.path_of(&f.rel_path))).collect();
-        let tables: Vec<(i64, SubmapEvidence)> =
-            paths.par_iter().map(|(g, p)| read_submap_evidence(p).map(|t| (*g, t))).collect::<Result<_, _>>()?;
-        // Files of one session share a generation version (one ingest).
-        let g = tables.first().map(|t| t.0).unwrap_or(version);
-        let at_gen = &gen_poses[&g];
-        let delta_of = |kf: u32| Some(delta(at_gen.get(&kf)?, now.get(&kf)?));
-        let refs: Vec<&SubmapEvidence> = tables.iter().map(|t| &t.1).collect();
-        reprojected_rows += refs.iter().map(|t| t.len()).sum::<usize>();
-        reprojected_voxels += reproject(&refs, cfg.voxel_size_m, delta_of).len();
-        for f in store::evidence_files(conn, earlier.id(), "cleaned_map")? {
+        for (g, d) in &deltas {
+            let paths: Vec<std::path::PathBuf> =
+                files.iter().filter(|f| f.graph_version == *g).map(|f| ctx.store.path_of(&f.rel_path)).collect();
+            let tables: Vec<SubmapEvidence> =
+                paths.par_iter().map(|p| read_submap_evidence(p)).collect::<Result<_, _>>()?;
+            let refs: Vec<&SubmapEvidence> = tables.iter().collect();
+            reprojected_rows += refs.iter().map(|t| t.len()).sum::<usize>();
+            reprojected_voxels += reproject(&refs, cfg.voxel_size_m, |kf| d.get(&kf).copied()).len();
+        }
+        for f in &cleaned {
             let m = read_cleaned_map(&ctx.store.path_of(&f.rel_path))?;
-            reprojected_cleaned += reproject_cleaned(&m, delta_of).len();
+            let d = &deltas[&f.graph_version];
+            reprojected_cleaned += reproject_cleaned(&m, |kf| d.get(&kf).copied()).len();
         }
     }
     let reproject_s = t_re.elapsed().as_secs_f64();
