@@ -9,6 +9,10 @@
 //! ```
 //!
 //! Poses: `gt/poses.txt` when present, else the folder's own.
+//! `--submap-kf` larger than the session moves the whole session rigidly.
+//! Submaps moved apart independently disagree more: evidence is kept only on
+//! the voxels some point occupies, so a submap's free evidence about where
+//! another submap's points now lie was never stored.
 
 use nalgebra::{Translation3, UnitQuaternion, Vector3};
 use rand::{Rng, SeedableRng};
@@ -78,6 +82,11 @@ fn main() -> Result<(), String> {
         100.0 * c.match_fraction
     );
     println!("within one voxel, same verdict: {:.2} %", 100.0 * c.neighbour_match_fraction);
+    println!(
+        "reprojected occupied voxels also occupied on recomputation: {} ({:.2} %)",
+        c.reprojected_also_recomputed,
+        100.0 * c.reprojected_also_recomputed as f64 / c.occupied_reprojected.max(1) as f64
+    );
     println!(
         "time: generate {:.2} s, reproject {:.3} s, recompute {:.2} s (reproject / recompute = {:.1} %)",
         c.generate_s,

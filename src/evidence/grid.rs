@@ -353,6 +353,36 @@ impl InterestEvidence {
         Self::on_sorted(keys, voxel_m)
     }
 
+    /// Evidence summed from parts of `(key, row)` pairs in any key order.
+    /// Equal keys merge in the order of the parts and then of the pairs, so
+    /// the sums do not depend on threads. The scalar log-odds are not
+    /// carried: only the directional statistics can be moved (see
+    /// [`super::session::reproject`]).
+    pub fn from_parts(parts: &[Vec<(u64, Row)>], voxel_m: f64) -> InterestEvidence {
+        // Sort 16-byte (key, where) pairs rather than the 80-byte rows.
+        let mut order: Vec<(u64, u32, u32)> = parts
+            .iter()
+            .enumerate()
+            .flat_map(|(p, part)| part.iter().enumerate().map(move |(i, (k, _))| (*k, p as u32, i as u32)))
+            .collect();
+        order.par_sort_unstable();
+        let mut keys: Vec<u64> = Vec::with_capacity(order.len());
+        let mut rows: Vec<Row> = Vec::with_capacity(order.len());
+        for (k, p, i) in order {
+            let r = &parts[p as usize][i as usize].1;
+            match (keys.last(), rows.last_mut()) {
+                (Some(&last), Some(w)) if last == k => w.merge(r),
+                _ => {
+                    keys.push(k);
+                    rows.push(*r);
+                }
+            }
+        }
+        let mut out = Self::on_sorted(keys, voxel_m);
+        out.rows = rows;
+        out
+    }
+
     /// Empty evidence on keys already sorted and unique.
     fn on_sorted(keys: Vec<u64>, voxel_m: f64) -> InterestEvidence {
         let mut bounds = Box3::EMPTY;
@@ -386,6 +416,11 @@ impl InterestEvidence {
     /// The row index of a packed key.
     pub fn find(&self, key: u64) -> Option<usize> {
         self.keys.binary_search(&key).ok()
+    }
+
+    /// The row of a packed key.
+    pub fn get(&self, key: u64) -> Option<&Row> {
+        self.find(key).map(|i| &self.rows[i])
     }
 
     /// The sub-set of these keys inside `b`, as a new empty evidence, with
@@ -532,12 +567,16 @@ impl InterestEvidence {
         self.rows.par_iter().zip(self.log_odds.par_iter()).map(|(r, &l)| eps_of(r, l, cfg) as f32).collect()
     }
 
-    /// The observed rows as a stored table (keys unpacked, sorted).
-    pub fn to_table(&self) -> SubmapEvidence {
+    /// The observed rows as a stored table (keys unpacked, sorted), with the
+    /// points' box per row (`hit_box_m[i]` for row `i`, see
+    /// [`SubmapEvidence::hit_box_m`]).
+    pub fn to_table(&self, hit_box_m: &[[f32; 6]]) -> SubmapEvidence {
+        assert_eq!(hit_box_m.len(), self.len(), "one hit box per row");
         let mut t = SubmapEvidence::default();
         let mut hit = StatsColumns::default();
         let mut free = StatsColumns::default();
-        for (k, r) in self.keys.iter().zip(&self.rows).filter(|(_, r)| r.is_observed()) {
+        for ((k, r), b) in self.keys.iter().zip(&self.rows).zip(hit_box_m).filter(|((_, r), _)| r.is_observed()) {
+            t.hit_box_m.push(*b);
             t.keys.push(unpack(*k));
             hit.n.push(r.hit_n);
             hit.q.push(r.hit_q);

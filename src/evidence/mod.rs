@@ -43,4 +43,4 @@ mod tables;
 pub use accumulate::{EvidenceMap, KeyframeEvidence, accumulate_keyframe, accumulate_keyframe_par};
 pub use raycast::{cast_ray, traverse, voxel_key};
 pub use stats::{DirectionalStats, EvidenceConfig, EvidenceModel, LogOddsConfig, VoxelEvidence, sym3_eigenvalues};
-pub use tables::{CleanedMap, PointLabels, StatsColumns, SubmapEvidence};
+pub use tables::{CleanedMap, NO_HIT_BOX, PointLabels, StatsColumns, SubmapEvidence};

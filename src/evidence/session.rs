@@ -22,9 +22,10 @@
 //! can be turned by any yaw). The submap-frame coordinates of a row are
 //! `A_gen⁻¹ · x`, with `A_gen` from the stored graph version.
 
-use super::grid::{Box3, InterestEvidence, RayStats, Row, eps_of, pack, packed_key, row_of, unpack};
+use super::grid::{Box3, InterestEvidence, RayStats, Row, pack, packed_key, row_of, unpack};
+use super::raycast::voxel_key;
 use super::stats::EvidenceConfig;
-use super::tables::{CleanedMap, PointLabels, SubmapEvidence};
+use super::tables::{CleanedMap, NO_HIT_BOX, PointLabels, SubmapEvidence};
 use crate::geometry::{Pose, VoxelKey, transformed};
 use nalgebra::Point3;
 use rayon::prelude::*;
@@ -126,13 +127,21 @@ pub fn generate(
         let (mut sub, idx) = session.subset(b);
         session.continue_log_odds(&mut sub, &idx);
         let mut rays = RayStats::default();
+        let mut boxes = vec![EMPTY_BOX; sub.len()];
         for kf in keyframes.iter().filter(|k| k.submap == s) {
-            rays += sub.add_keyframe(&origin(kf), &world_points(kf), kf.index, cfg);
+            let pts = world_points(kf);
+            rays += sub.add_keyframe(&origin(kf), &pts, kf.index, cfg);
+            grow_hit_boxes(&sub, &pts, &mut boxes);
             done += 1;
             progress(done);
         }
         stats.skipped_rays += rays.skipped_rays;
-        let table = sub.to_table();
+        for b in &mut boxes {
+            if b[0] > b[3] {
+                *b = NO_HIT_BOX;
+            }
+        }
+        let table = sub.to_table(&boxes);
         stats.generated_voxels += table.len();
         session.merge_subset(&sub, &idx);
         submaps.push(table);
@@ -151,6 +160,32 @@ pub fn generate(
     stats.cleaned_voxels = cleaned.iter().map(CleanedMap::len).sum();
     stats.total_s = started.elapsed().as_secs_f64();
     SessionEvidence { submaps, cleaned, labels, stats }
+}
+
+/// An empty box for [`grow_hit_boxes`]: every `lo` above every `hi`.
+const EMPTY_BOX: [f32; 6] =
+    [f32::INFINITY, f32::INFINITY, f32::INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY];
+
+/// Grows each row's box of points (offsets from the voxel's lower corner,
+/// see [`SubmapEvidence::hit_box_m`]) by one keyframe's world points.
+fn grow_hit_boxes(sub: &InterestEvidence, points_m: &[[f64; 3]], boxes: &mut [[f32; 6]]) {
+    let v = sub.voxel_m;
+    let found: Vec<(u32, [f32; 3])> = points_m
+        .par_iter()
+        .filter_map(|p| {
+            let k = packed_key(p, v)?;
+            let i = sub.find(k)?;
+            let c = unpack(k).0;
+            Some((i as u32, [0, 1, 2].map(|a| (p[a] - c[a] as f64 * v) as f32)))
+        })
+        .collect();
+    for (i, o) in found {
+        let b = &mut boxes[i as usize];
+        for a in 0..3 {
+            b[a] = b[a].min(o[a]);
+            b[a + 3] = b[a + 3].max(o[a]);
+        }
+    }
 }
 
 /// DOR's verdict per voxel: ε_l > τ_dyn, and with `static_neighbour_veto`
@@ -288,22 +323,33 @@ pub fn delta(t_world_keyframe_gen: &Pose, t_world_keyframe_now: &Pose) -> Pose {
 type Motion = (Pose, [[f64; 3]; 3]);
 
 /// Re-bins stored evidence rows into the world grid after their owners moved
-/// by `delta_of(owner_keyframe)` (eqs. 9-11): the voxel centre moves with its
-/// owner's ΔT, and `M' = R M Rᵀ` for both kinds. Rows landing on one voxel
-/// are summed. Owners `delta_of` does not know keep their place.
+/// by `delta_of(owner_keyframe)` (eqs. 9-11), with `M' = R M Rᵀ` for both
+/// kinds. A row with a box of points ([`SubmapEvidence::hit_box_m`]) lands in
+/// every voxel its moved box overlaps — the voxels its moved points fall in
+/// (at most [`MAX_SPLAT`]; a larger box keeps only its centre's voxel) —
+/// and a row without one where its moved voxel centre falls. Rows landing on
+/// one voxel are summed. Owners `delta_of` does not know keep their place.
+///
+/// Only the directional statistics move: the result's ε_l is the
+/// directional model's whatever `EvidenceConfig::model` says.
 pub fn reproject(
     tables: &[&SubmapEvidence],
     voxel_m: f64,
     delta_of: impl Fn(u32) -> Option<Pose> + Sync,
-) -> FxHashMap<u64, Row> {
-    let parts: Vec<Vec<(u64, Row)>> = tables
-        .par_iter()
-        .map(|t| {
+) -> InterestEvidence {
+    // Chunks of rows, so that one large table uses every thread too.
+    const CHUNK: usize = 1 << 14;
+    let chunks: Vec<(&SubmapEvidence, std::ops::Range<usize>)> = tables
+        .iter()
+        .flat_map(|t| (0..t.len()).step_by(CHUNK).map(move |a| (*t, a..(a + CHUNK).min(t.len()))))
+        .collect();
+    let parts: Vec<Vec<(u64, Row)>> = chunks
+        .into_par_iter()
+        .map(|(t, range)| {
             let mut cache: FxHashMap<u32, Option<Motion>> = FxHashMap::default();
-            let mut out = Vec::with_capacity(t.len());
-            for i in 0..t.len() {
+            let mut out = Vec::with_capacity(range.len() * 2);
+            for i in range {
                 let mut row = row_of(t, i);
-                let c = t.keys[i].center_m(voxel_m);
                 let moved = cache
                     .entry(row.owner_keyframe)
                     .or_insert_with(|| {
@@ -313,30 +359,54 @@ pub fn reproject(
                         })
                     })
                     .as_ref();
-                let key = match moved {
-                    Some((d, r)) => {
-                        row.hit_m = rotate_sym(r, &row.hit_m);
-                        row.free_m = rotate_sym(r, &row.free_m);
-                        let p = d * Point3::from(c);
-                        packed_key(&[p.x, p.y, p.z], voxel_m)
-                    }
-                    None => pack(t.keys[i]),
+                let Some((d, r)) = moved else {
+                    out.extend(pack(t.keys[i]).map(|k| (k, row)));
+                    continue;
                 };
-                if let Some(k) = key {
-                    out.push((k, row));
-                }
+                row.hit_m = rotate_sym(r, &row.hit_m);
+                row.free_m = rotate_sym(r, &row.free_m);
+                moved_voxels(t.keys[i], &t.hit_box_m[i], d, voxel_m, |k| out.push((k, row)));
             }
             out
         })
         .collect();
-    let mut world: FxHashMap<u64, Row> = FxHashMap::default();
-    world.reserve(parts.iter().map(Vec::len).sum::<usize>() / 2);
-    for part in parts {
-        for (k, r) in part {
-            world.entry(k).and_modify(|w| w.merge(&r)).or_insert(r);
+    InterestEvidence::from_parts(&parts, voxel_m)
+}
+
+/// The most voxels one moved row is spread over: a box of points moved by a
+/// small motion overlaps at most 2 voxels per axis.
+pub const MAX_SPLAT: usize = 8;
+
+/// The packed keys a stored voxel lands on after moving by `d`: those its
+/// moved box of points overlaps, or its moved centre's.
+fn moved_voxels(key: VoxelKey, hit_box_m: &[f32; 6], d: &Pose, voxel_m: f64, mut emit: impl FnMut(u64)) {
+    let corner = key.0.map(|c| c as f64 * voxel_m);
+    let centre = d * Point3::from(key.center_m(voxel_m));
+    let mut by_centre = || packed_key(&[centre.x, centre.y, centre.z], voxel_m).into_iter().for_each(&mut emit);
+    if hit_box_m.iter().any(|v| !v.is_finite()) {
+        return by_centre();
+    }
+    let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+    for c in 0..8 {
+        let p = Point3::from([0, 1, 2].map(|a| corner[a] + hit_box_m[a + 3 * ((c >> a) & 1)] as f64));
+        let q = d * p;
+        for a in 0..3 {
+            lo[a] = lo[a].min(q[a]);
+            hi[a] = hi[a].max(q[a]);
         }
     }
-    world
+    let (Some(klo), Some(khi)) = (voxel_key(&lo, voxel_m), voxel_key(&hi, voxel_m)) else { return by_centre() };
+    let span = (0..3).map(|a| (khi.0[a] as i64 - klo.0[a] as i64 + 1) as usize).product::<usize>();
+    if span > MAX_SPLAT {
+        return by_centre();
+    }
+    for x in klo.0[0]..=khi.0[0] {
+        for y in klo.0[1]..=khi.0[1] {
+            for z in klo.0[2]..=khi.0[2] {
+                pack(VoxelKey([x, y, z])).into_iter().for_each(&mut emit);
+            }
+        }
+    }
 }
 
 /// `R M Rᵀ` of a symmetric matrix kept as its upper triangle.
@@ -351,13 +421,6 @@ fn rotate_sym(r: &[[f64; 3]; 3], m: &[f32; 6]) -> [f32; 6] {
     }
     let e = |a: usize, b: usize| -> f32 { (0..3).map(|k| rm[a][k] * r[b][k]).sum::<f64>() as f32 };
     [e(0, 0), e(0, 1), e(0, 2), e(1, 1), e(1, 2), e(2, 2)]
-}
-
-/// ε_l of re-binned rows (the log-odds baseline is not carried through
-/// reprojection: its clamped value depends on keyframe order, which summing
-/// rows loses, so the baseline reads as "no evidence" there).
-pub fn eps_of_rows(rows: &FxHashMap<u64, Row>, cfg: &EvidenceConfig) -> FxHashMap<u64, f32> {
-    rows.iter().map(|(k, r)| (*k, eps_of(r, 0.0, cfg) as f32)).collect()
 }
 
 /// Moves a cleaned map's centroids with their owners' ΔT (eq. 11).
@@ -381,6 +444,10 @@ pub struct ReprojectionCheck {
     pub occupied_recomputed: usize,
     /// Occupied voxels after reprojecting the old evidence.
     pub occupied_reprojected: usize,
+    /// Of those, the ones occupied in the recomputed evidence too: a moved
+    /// box of points spread over voxels the moved points do not reach shows
+    /// here as a fraction below 1.
+    pub reprojected_also_recomputed: usize,
     /// Recomputed occupied voxels that are occupied after reprojection too.
     pub same_voxel: usize,
     /// ... and get the same dynamic verdict (ε_l > τ_dyn).
@@ -388,9 +455,7 @@ pub struct ReprojectionCheck {
     /// `same_voxel_and_verdict / occupied_recomputed`.
     pub match_fraction: f64,
     /// Recomputed occupied voxels with a reprojected occupied voxel of the
-    /// same verdict at most one voxel away (26-neighbourhood), as a fraction:
-    /// re-binning a moved voxel centre can land one voxel off where the moved
-    /// points fall.
+    /// same verdict at most one voxel away (26-neighbourhood), as a fraction.
     pub neighbour_match_fraction: f64,
     pub generate_s: f64,
     pub reproject_s: f64,
@@ -409,7 +474,7 @@ pub fn check_reprojection(inputs: &[KeyframeInput<'_>], poses_now: &[Pose], cfg:
     let t = Instant::now();
     let tables: Vec<&SubmapEvidence> = before.submaps.iter().collect();
     let moved = reproject(&tables, cfg.voxel_size_m, |kf| by_index.get(&kf).copied());
-    let moved_eps = eps_of_rows(&moved, cfg);
+    let moved_eps = moved.eps_l(cfg);
     let reproject_s = t.elapsed().as_secs_f64();
 
     let now_inputs: Vec<KeyframeInput<'_>> =
@@ -419,26 +484,36 @@ pub fn check_reprojection(inputs: &[KeyframeInput<'_>], poses_now: &[Pose], cfg:
     let recompute_s = t.elapsed().as_secs_f64();
     let tables: Vec<&SubmapEvidence> = after.submaps.iter().collect();
     let fresh = reproject(&tables, cfg.voxel_size_m, |_| None);
-    let fresh_eps = eps_of_rows(&fresh, cfg);
+    let fresh_eps = fresh.eps_l(cfg);
 
     let dynamic = |e: f32| e as f64 > cfg.tau_dyn;
+    // The row index of an occupied voxel.
+    let occupied = |e: &InterestEvidence, k: u64| e.find(k).filter(|&i| e.rows()[i].hit_n > 0);
     let mut out = ReprojectionCheck { generate_s, reproject_s, recompute_s, ..Default::default() };
-    out.occupied_reprojected = moved.values().filter(|r| r.hit_n > 0).count();
-    let mut near = 0usize;
-    for k in fresh.iter().filter(|(_, r)| r.hit_n > 0).map(|(k, _)| k) {
-        out.occupied_recomputed += 1;
-        let verdict = dynamic(fresh_eps[k]);
-        if moved.get(k).is_some_and(|m| m.hit_n > 0) {
-            out.same_voxel += 1;
-            out.same_voxel_and_verdict += (dynamic(moved_eps[k]) == verdict) as usize;
+    for (&k, r) in moved.keys().iter().zip(moved.rows()) {
+        if r.hit_n > 0 {
+            out.occupied_reprojected += 1;
+            out.reprojected_also_recomputed += occupied(&fresh, k).is_some() as usize;
         }
-        let c = unpack(*k).0;
+    }
+    let mut near = 0usize;
+    for (i, (&k, r)) in fresh.keys().iter().zip(fresh.rows()).enumerate() {
+        if r.hit_n == 0 {
+            continue;
+        }
+        out.occupied_recomputed += 1;
+        let verdict = dynamic(fresh_eps[i]);
+        if let Some(j) = occupied(&moved, k) {
+            out.same_voxel += 1;
+            out.same_voxel_and_verdict += (dynamic(moved_eps[j]) == verdict) as usize;
+        }
+        let c = unpack(k).0;
         let found = (-1..=1).any(|dz| {
             (-1..=1).any(|dy| {
                 (-1..=1).any(|dx| {
                     pack(VoxelKey([c[0] + dx, c[1] + dy, c[2] + dz]))
-                        .and_then(|n| moved.get(&n).map(|m| (n, m)))
-                        .is_some_and(|(n, m)| m.hit_n > 0 && dynamic(moved_eps[&n]) == verdict)
+                        .and_then(|n| occupied(&moved, n))
+                        .is_some_and(|j| dynamic(moved_eps[j]) == verdict)
                 })
             })
         });
@@ -570,22 +645,88 @@ mod tests {
             t.free.m.push([0.0; 6]);
             t.owner_keyframe.push(7);
             t.owner_q.push(1.0);
+            t.hit_box_m.push(NO_HIT_BOX);
         }
         let same = reproject(&[&t], 0.2, |_| Some(Pose::identity()));
         assert_eq!(same.len(), 5);
-        assert!(t.keys.iter().all(|k| same.contains_key(&pack(*k).unwrap())));
+        assert!(t.keys.iter().all(|k| same.get(pack(*k).unwrap()).is_some()));
         let moved = reproject(&[&t], 0.2, |kf| {
             (kf == 7).then(|| Pose::from_parts(Translation3::new(0.4, 0.0, 0.2), UnitQuaternion::identity()))
         });
-        assert!(t.keys.iter().all(|k| moved.contains_key(&pack(VoxelKey([k.0[0] + 2, 2, -2])).unwrap())));
+        assert!(t.keys.iter().all(|k| moved.get(pack(VoxelKey([k.0[0] + 2, 2, -2])).unwrap()).is_some()));
         // A half-turn about z maps M's xx to xx and the key's x to -x.
         let turn = Pose::from_parts(
             Translation3::identity(),
             UnitQuaternion::from_axis_angle(&Vector3::z_axis(), std::f64::consts::PI),
         );
         let turned = reproject(&[&t], 0.2, |_| Some(turn));
-        let r = turned[&pack(VoxelKey([-1, -3, -3])).unwrap()];
+        let r = turned.get(pack(VoxelKey([-1, -3, -3])).unwrap()).unwrap();
         assert!((r.hit_m[0] - 1.0).abs() < 1e-6 && r.hit_m[1].abs() < 1e-6);
+    }
+
+    /// A row with a box of points lands in every voxel the moved box
+    /// overlaps and nowhere else; a box too large to be a small motion's
+    /// keeps only its centre's voxel.
+    #[test]
+    fn moved_box_lands_where_its_points_do() {
+        let keys = |b: [f32; 6], d: Pose| {
+            let mut v = Vec::new();
+            moved_voxels(VoxelKey([3, 0, 0]), &b, &d, 0.2, |k| v.push(unpack(k).0));
+            v.sort();
+            v
+        };
+        let shift = |x: f64, y: f64| Pose::from_parts(Translation3::new(x, y, 0.0), UnitQuaternion::identity());
+        // Points in x ∈ [0.6, 0.7] (offsets 0..0.1), y ∈ [0.05, 0.06], z ∈ [0.1, 0.1].
+        let b = [0.0, 0.05, 0.1, 0.1, 0.06, 0.1];
+        assert_eq!(keys(b, shift(0.0, 0.0)), vec![[3, 0, 0]]);
+        // +0.15 m in x: the points span x ∈ [0.75, 0.85], across the face at 0.8.
+        assert_eq!(keys(b, shift(0.15, 0.0)), vec![[3, 0, 0], [4, 0, 0]]);
+        // The voxel centre (0.7 → 0.85) alone would have said [4, 0, 0] only.
+        // -0.08 m in y: y ∈ [-0.03, -0.02], one voxel down, x unchanged.
+        assert_eq!(keys(b, shift(0.0, -0.08)), vec![[3, -1, 0]]);
+        // No box: the centre decides.
+        assert_eq!(keys(NO_HIT_BOX, shift(0.15, 0.0)), vec![[4, 0, 0]]);
+        // A box spread over a 3×3×3 block is not a small motion's: centre only.
+        let turn = Pose::from_parts(
+            Translation3::new(0.1, 0.1, 0.1),
+            UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 0.9),
+        );
+        assert!(keys([0.0, 0.0, 0.0, 0.2, 0.2, 0.2], turn).len() == 1);
+    }
+
+    /// A session moved rigidly by a sub-voxel shift and a small turn:
+    /// reprojection agrees with recomputation on ≥ 95 % of the occupied
+    /// voxels, which moving voxel centres alone does not reach.
+    #[test]
+    fn reprojection_matches_recomputation_for_sub_voxel_motion() {
+        let mut pts: Vec<[f32; 3]> = Vec::new();
+        for i in 0..300 {
+            for h in 0..12 {
+                let (x, z) = (i as f32 * 0.07 - 10.0, h as f32 * 0.15 - 0.9);
+                pts.push([x, 5.03, z]);
+                pts.push([x, -4.97, z]);
+            }
+        }
+        let poses: Vec<Pose> = (0..6)
+            .map(|f| {
+                Pose::from_parts(Translation3::new(f as f64 * 0.7 + 0.013, 0.021, 1.017), UnitQuaternion::identity())
+            })
+            .collect();
+        let inputs: Vec<KeyframeInput<'_>> = poses
+            .iter()
+            .enumerate()
+            .map(|(i, t)| KeyframeInput { index: i as u32, submap: i / 3, t_world_keyframe: *t, points: &pts })
+            .collect();
+        let motion = Pose::from_parts(
+            Translation3::new(0.13, -0.07, 0.05),
+            UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 1.5f64.to_radians()),
+        );
+        let now: Vec<Pose> = poses.iter().map(|p| motion * p).collect();
+        let c = check_reprojection(&inputs, &now, &EvidenceConfig::default());
+        assert!(c.occupied_recomputed > 1000);
+        assert_eq!(c.same_voxel, c.occupied_recomputed, "{c:?}");
+        assert!(c.match_fraction > 0.95, "{c:?}");
+        assert!(c.reprojected_also_recomputed as f64 > 0.8 * c.occupied_reprojected as f64, "{c:?}");
     }
 
     /// Moving every keyframe by whole voxels moves the ray-cast evidence by

@@ -45,7 +45,16 @@ pub struct SubmapEvidence {
     pub owner_keyframe: Vec<u32>,
     /// That keyframe's contribution.
     pub owner_q: Vec<f32>,
+    /// Bounding box of the submap's points in the voxel, as offsets in metres
+    /// from the voxel's lower corner: `[lo_x, lo_y, lo_z, hi_x, hi_y, hi_z]`;
+    /// NaN where none of the submap's points fell (the voxel was only freed).
+    /// Reprojection moves this box, not the voxel centre, so a voxel whose
+    /// points straddle a new voxel boundary lands in every voxel they do.
+    pub hit_box_m: Vec<[f32; 6]>,
 }
+
+/// The `hit_box_m` of a voxel no point fell into.
+pub const NO_HIT_BOX: [f32; 6] = [f32::NAN; 6];
 
 impl SubmapEvidence {
     pub fn len(&self) -> usize {

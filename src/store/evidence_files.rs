@@ -17,7 +17,7 @@
 //!
 //! | kind           | columns |
 //! |----------------|---------|
-//! | `evidence`     | `kx ky kz` int32, `{hit,free}_n` int32, `{hit,free}_q` float32, `{hit,free}_m{xx,xy,xz,yy,yz,zz}` float32, `owner_keyframe` int32, `owner_q` float32 |
+//! | `evidence`     | `kx ky kz` int32, `{hit,free}_n` int32, `{hit,free}_q` float32, `{hit,free}_m{xx,xy,xz,yy,yz,zz}` float32, `owner_keyframe` int32, `owner_q` float32, `hit_{lo,hi}_{x,y,z}_m` float32 (NaN: no point) |
 //! | `cleaned_map`  | `x_m y_m z_m eps_l` float32, `points owner_keyframe` int32 |
 //! | `point_labels` | `keyframe point_index` int32, `dynamic` boolean, `eps_l` float32 (also the export format) |
 
@@ -134,6 +134,9 @@ fn stats_fields(prefix: &str) -> Vec<Field> {
     v
 }
 
+/// The six `hit_box_m` columns, in its order.
+const HIT_BOX_COLUMNS: [&str; 6] = ["hit_lo_x_m", "hit_lo_y_m", "hit_lo_z_m", "hit_hi_x_m", "hit_hi_y_m", "hit_hi_z_m"];
+
 /// Columns of an `evidence` file.
 pub fn submap_evidence_schema() -> SchemaRef {
     let mut f = vec![field("kx", DataType::Int32), field("ky", DataType::Int32), field("kz", DataType::Int32)];
@@ -141,6 +144,7 @@ pub fn submap_evidence_schema() -> SchemaRef {
     f.extend(stats_fields("free"));
     f.push(field("owner_keyframe", DataType::Int32));
     f.push(field("owner_q", DataType::Float32));
+    f.extend(HIT_BOX_COLUMNS.iter().map(|c| field(*c, DataType::Float32)));
     Arc::new(Schema::new(f))
 }
 
@@ -224,6 +228,7 @@ pub fn submap_evidence_batch(path: &Path, ev: &SubmapEvidence) -> Result<RecordB
             ("free_m", ev.free.m.len()),
             ("owner_keyframe", ev.owner_keyframe.len()),
             ("owner_q", ev.owner_q.len()),
+            ("hit_box_m", ev.hit_box_m.len()),
         ],
     )?;
     let mut cols: Vec<ArrayRef> = (0..3).map(|i| i32_col(ev.keys.iter().map(|k| k.0[i]))).collect();
@@ -231,6 +236,7 @@ pub fn submap_evidence_batch(path: &Path, ev: &SubmapEvidence) -> Result<RecordB
     cols.extend(stats_cols(path, "free", &ev.free)?);
     cols.push(u32_col(path, "owner_keyframe", &ev.owner_keyframe)?);
     cols.push(f32_col(ev.owner_q.iter().copied()));
+    cols.extend((0..6).map(|i| f32_col(ev.hit_box_m.iter().map(|b| b[i]))));
     batch(path, submap_evidence_schema(), cols)
 }
 
@@ -419,7 +425,9 @@ pub fn read_submap_evidence(path: &Path) -> Result<SubmapEvidence, StoreError> {
     let t = Table::read(path, &submap_evidence_schema())?;
     let (kx, ky, kz) = (t.i32s("kx")?, t.i32s("ky")?, t.i32s("kz")?);
     let keys = (0..t.rows).map(|r| VoxelKey([kx[r], ky[r], kz[r]])).collect();
+    let boxes: Vec<Vec<f32>> = HIT_BOX_COLUMNS.iter().map(|c| t.f32s(c)).collect::<Result<_, _>>()?;
     Ok(SubmapEvidence {
+        hit_box_m: (0..t.rows).map(|r| std::array::from_fn(|i| boxes[i][r])).collect(),
         keys,
         hit: t.stats("hit")?,
         free: t.stats("free")?,
@@ -507,6 +515,7 @@ mod tests {
             free: stats(n, 1.5),
             owner_keyframe: (0..n as u32).map(|i| i % 4).collect(),
             owner_q: (0..n).map(|i| 1.0 / (i as f32 + 1.0)).collect(),
+            hit_box_m: (0..n).map(|i| std::array::from_fn(|k| (i % 5 + k) as f32 * 0.02)).collect(),
         }
     }
 
@@ -553,8 +562,15 @@ mod tests {
             assert_eq!(read_submap_evidence(&s.path_of(&rel)).unwrap(), ev);
         }
         let cols: Vec<String> = submap_evidence_schema().fields().iter().map(|f| f.name().clone()).collect::<Vec<_>>();
-        assert_eq!(cols.len(), 3 + 8 + 8 + 2);
+        assert_eq!(cols.len(), 3 + 8 + 8 + 2 + 6);
         assert!(cols.contains(&"free_mzz".to_string()) && cols.contains(&"hit_mxy".to_string()));
+        // A voxel no point fell in keeps its NaN box.
+        let mut ev = evidence(3);
+        ev.hit_box_m[1] = crate::evidence::NO_HIT_BOX;
+        write_submap_evidence(&s, "data/evidence/nan.parquet", &ev).unwrap();
+        let back = read_submap_evidence(&s.path_of("data/evidence/nan.parquet")).unwrap();
+        assert!(back.hit_box_m[1].iter().all(|v| v.is_nan()));
+        assert_eq!(back.hit_box_m[2], ev.hit_box_m[2]);
     }
 
     #[test]
