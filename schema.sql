@@ -184,3 +184,84 @@ CREATE TABLE session_dor (
     raycast_s         REAL NOT NULL,
     total_s           REAL NOT NULL
 );
+
+-- @migration 4
+-- Change detection (MATH.md §8). The lifelong map holds every voxel any
+-- session's cleaned map ever had, placed on the world grid of the graph
+-- version in `map_state` (each ingest moves it to the new version with its
+-- owner keyframes' ΔT and re-bins it). The static map is `eps_g < 0.5`.
+--
+-- Spatial index: two levels. `map_tiles` is an R*Tree of fixed world cubes
+-- (`map_state.tile_m`, 4 m), keyed by the tile's packed key; voxels and change
+-- events carry their tile, with a B-tree index on it. A box query asks the
+-- R*Tree for the tiles, then the B-tree for their rows, then filters exactly.
+-- Rewriting the map (it moves with every re-optimisation) then costs B-tree
+-- inserts, not one R*Tree insert per voxel (≈8 µs each).
+CREATE TABLE map_voxels (
+    voxel_id           INTEGER PRIMARY KEY,              -- stable while the voxel lives
+    kx                 INTEGER NOT NULL,                 -- key on the world grid, voxel map_state.voxel_m
+    ky                 INTEGER NOT NULL,
+    kz                 INTEGER NOT NULL,
+    tile               INTEGER NOT NULL,                 -- map_tiles id of the centroid
+    x_m                REAL NOT NULL,                    -- centroid of its points, world frame (`seam poses`)
+    y_m                REAL NOT NULL,
+    z_m                REAL NOT NULL,
+    eps_g              REAL NOT NULL,                    -- global ephemerality, clamped [0.1, 0.9]
+    eps_l              REAL NOT NULL,                    -- ε_l in the last session that saw it
+    points             INTEGER NOT NULL,                 -- points behind the centroid, last session that saw it
+    first_session      INTEGER NOT NULL REFERENCES sessions(session_id),
+    last_seen_session  INTEGER NOT NULL REFERENCES sessions(session_id),
+    category           TEXT NOT NULL CHECK (category IN ('initial', 'coexist', 'deleted_overlap',
+                           'deleted_non_overlap', 'emerged_overlap', 'emerged_non_overlap')),
+    category_session   INTEGER NOT NULL REFERENCES sessions(session_id),  -- session that set `category`
+    owner_session      INTEGER NOT NULL REFERENCES sessions(session_id),  -- the voxel moves with this
+    owner_keyframe     INTEGER NOT NULL                                   -- keyframe (index in owner_session)
+);
+CREATE INDEX map_voxels_by_tile ON map_voxels(tile);
+
+-- Fixed world cubes that hold any map voxel or change event, world frame.
+CREATE VIRTUAL TABLE map_tiles USING rtree(tile, min_x, max_x, min_y, max_y, min_z, max_z);
+
+-- Where the lifelong map stands: the graph version its positions are on.
+CREATE TABLE map_state (
+    id             INTEGER PRIMARY KEY CHECK (id = 1),
+    graph_version  INTEGER NOT NULL REFERENCES graph_versions(graph_version),
+    session_id     INTEGER NOT NULL REFERENCES sessions(session_id),   -- last session folded in
+    voxel_m        REAL NOT NULL,
+    tile_m         REAL NOT NULL
+);
+
+-- Every change a session saw: emerged (either kind) and deleted-with-overlap
+-- voxels, a voxel seen again right after a deleted-with-overlap (`coexist`),
+-- and the first deleted-non-overlap of a run. Positions are the voxel
+-- centroid on the graph version of that session's ingest.
+CREATE TABLE change_events (
+    event_id       INTEGER PRIMARY KEY,
+    session_id     INTEGER NOT NULL REFERENCES sessions(session_id),
+    voxel_id       INTEGER NOT NULL,                  -- map_voxels.voxel_id at the time
+    tile           INTEGER NOT NULL,                  -- map_tiles id of the position
+    x_m            REAL NOT NULL,
+    y_m            REAL NOT NULL,
+    z_m            REAL NOT NULL,
+    category       TEXT NOT NULL CHECK (category IN ('coexist', 'deleted_overlap', 'deleted_non_overlap',
+                       'emerged_overlap', 'emerged_non_overlap')),
+    eps_g_before   REAL,                              -- NULL: the voxel was new to the map
+    eps_g_after    REAL NOT NULL
+);
+CREATE INDEX change_events_by_tile ON change_events(tile, session_id);
+CREATE INDEX change_events_by_session ON change_events(session_id, category);
+
+-- One row per session: its five categories and the map after it.
+CREATE TABLE session_changes (
+    session_id            INTEGER PRIMARY KEY REFERENCES sessions(session_id),
+    graph_version         INTEGER NOT NULL REFERENCES graph_versions(graph_version),
+    coexist               INTEGER NOT NULL,
+    deleted_overlap       INTEGER NOT NULL,
+    deleted_non_overlap   INTEGER NOT NULL,
+    emerged_overlap       INTEGER NOT NULL,
+    emerged_non_overlap   INTEGER NOT NULL,
+    events                INTEGER NOT NULL,
+    merged_on_move        INTEGER NOT NULL,    -- map voxels merged when re-binned to this version
+    lifelong_voxels       INTEGER NOT NULL,
+    static_voxels         INTEGER NOT NULL
+);

@@ -21,6 +21,9 @@
 //!
 //! [evidence]           # evidence::EvidenceConfig
 //! model = "log_odds"   # the scalar baseline instead of directional evidence
+//!
+//! [change]             # change::ChangeConfig
+//! tau_o_m = 2.0
 //! ```
 
 use serde::{Deserialize, Serialize};
@@ -41,6 +44,8 @@ pub struct Config {
     pub graph: crate::graph::GraphConfig,
     /// Directional evidence, DOR and the scalar baseline (MATH.md §6).
     pub evidence: crate::evidence::EvidenceConfig,
+    /// Change detection and the lifelong map (MATH.md §8).
+    pub change: crate::change::ChangeConfig,
 }
 
 /// Submap cutting (MATH.md §1).
@@ -137,6 +142,7 @@ impl Config {
             .validate()
             .map_err(|m| ConfigError::Invalid { path: path.into(), message: format!("global: {m}") })?;
         self.evidence.validate().map_err(|m| ConfigError::Invalid { path: path.into(), message: m })?;
+        self.change.validate().map_err(|m| ConfigError::Invalid { path: path.into(), message: m })?;
         Ok(())
     }
 }

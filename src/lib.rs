@@ -43,6 +43,7 @@
 //! ```
 
 pub mod align;
+pub mod change;
 pub mod cli;
 pub mod config;
 pub mod eval;

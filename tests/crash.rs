@@ -1,7 +1,8 @@
 //! Crash consistency: an ingest killed at any point (by an injected abort at
 //! every named fault point, and by real `kill -9` at several moments) leaves a
 //! store that `seam check` passes, and a re-run finishes with the same content
-//! as an uninterrupted run.
+//! as an uninterrupted run — the database (lifelong map, change events and
+//! tile index included) and every data file.
 
 mod common;
 use common::*;
@@ -59,6 +60,7 @@ fn abort_at_every_fault_point_then_resume() {
         "cleaned_map:before_rename",
         "point_labels:before_rename",
         "evidence:before_commit",
+        "changes:before_commit",
         "complete:before_commit",
     ] {
         assert!(points.iter().any(|p| p == expected), "fault point {expected} not reached; saw {points:?}");

@@ -1,12 +1,21 @@
 //! `seam export`: point labels of every session that has them, as
-//! Hive-partitioned Parquet with a catalog; bad table names are usage errors
-//! that write nothing; an existing table is only replaced with --overwrite.
+//! Hive-partitioned Parquet with a catalog; the static map, lifelong map and
+//! change events of the lifelong map; bad table names are usage errors that
+//! write nothing; an existing table is only replaced with --overwrite.
 
 mod common;
+use arrow_array::{Array, Float32Array, Float64Array, Int32Array, Int64Array, RecordBatch, StringArray};
 use common::*;
+use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
+use seam::change::{Category, ChangeEvent, LifelongMap, MapVoxel, SessionChanges};
 use seam::evidence::PointLabels;
+use seam::geometry::VoxelKey;
 use seam::store::evidence_files::{read_point_labels, write_point_labels};
-use seam::store::{NewSession, Store, StoreError, insert_file, insert_session};
+use seam::store::map_export::z_order;
+use seam::store::{
+    NewSession, SessionId, Store, StoreError, insert_change_events, insert_file, insert_graph_version, insert_session,
+    insert_session_changes, replace_lifelong_map,
+};
 use std::path::Path;
 
 fn labels(n: usize, seed: i32) -> PointLabels {
@@ -18,8 +27,11 @@ fn labels(n: usize, seed: i32) -> PointLabels {
     }
 }
 
-/// A store with three sessions; the first two have point labels.
-fn setup(tmp: &Path) -> (std::path::PathBuf, Vec<PointLabels>) {
+/// A store with three sessions; the first two have point labels. Returns
+/// the writer that made it, still open: reopening a writer right after
+/// closing one is racy in a test binary, where another thread's child
+/// process may briefly inherit the lock (between its fork and exec).
+fn setup(tmp: &Path) -> (std::path::PathBuf, Vec<PointLabels>, Store) {
     let root = tmp.join("site.seam");
     init_store(&root);
     let mut store = Store::open(&root).unwrap();
@@ -51,7 +63,7 @@ fn setup(tmp: &Path) -> (std::path::PathBuf, Vec<PointLabels>) {
             Ok(())
         })
         .unwrap();
-    (root, want)
+    (root, want, store)
 }
 
 fn names(dir: &Path) -> Vec<String> {
@@ -64,10 +76,9 @@ fn names(dir: &Path) -> Vec<String> {
 #[test]
 fn exports_point_labels_per_session_with_a_catalog() {
     let tmp = tempfile::tempdir().unwrap();
-    let (root, want) = setup(tmp.path());
-    let out = tmp.path().join("out");
     // A writer holding the store does not stop a read-only export.
-    let _writer = Store::open(&root).unwrap();
+    let (root, want, _writer) = setup(tmp.path());
+    let out = tmp.path().join("out");
     let o = run(&["export", root.to_str().unwrap(), out.to_str().unwrap(), "--tables", "point_labels"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let text = stdout(&o);
@@ -137,7 +148,7 @@ fn exports_point_labels_per_session_with_a_catalog() {
 #[test]
 fn unknown_table_is_a_usage_error_that_writes_nothing() {
     let tmp = tempfile::tempdir().unwrap();
-    let (root, _) = setup(tmp.path());
+    let (root, _, _writer) = setup(tmp.path());
     for tables in ["bogus", "point_labels,bogus"] {
         let out = tmp.path().join("out");
         let o = run(&["export", root.to_str().unwrap(), out.to_str().unwrap(), "--tables", tables]);
@@ -166,4 +177,409 @@ fn store_without_labels_exports_an_empty_table() {
     let o = run(&["export", tmp.path().join("nope").to_str().unwrap(), tmp.path().join("o2").to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(4), "{}", stderr(&o));
     assert!(!tmp.path().join("o2").exists());
+}
+
+// ---------------------------------------------------------------------------
+// The lifelong map: static_map, lifelong_map, changes
+
+const VOXEL_M: f64 = 0.2;
+/// ε_g by `i % 9`: 0.5 itself is not static (the static map is ε_g < 0.5).
+const EPS_G: [f32; 9] = [0.1, 0.2, 0.3, 0.4, 0.49, 0.5, 0.6, 0.75, 0.9];
+const VOXELS: usize = 300;
+/// Change events of sessions 2 and 3; session 1 (the first) has none.
+const EVENTS: [usize; 2] = [40, 25];
+
+fn map_voxel(i: usize) -> MapVoxel {
+    let key = [(i % 10) as i32 - 5, ((i / 10) % 10) as i32 - 5, (i / 100) as i32];
+    let s = 1 + (i % 3) as i64;
+    MapVoxel {
+        voxel_id: 1000 + 3 * i as i64,
+        key: VoxelKey(key),
+        xyz_m: key.map(|k| k as f64 * VOXEL_M + 0.05 + (i % 7) as f64 * 0.01),
+        eps_g: EPS_G[i % 9],
+        eps_l: (i % 10) as f32 * 0.1,
+        points: i as u32 + 1,
+        first_session: s,
+        last_seen_session: 3,
+        category: Category::ALL[i % 6],
+        category_session: s,
+        owner_session: s,
+        owner_keyframe: (i % 7) as u32,
+    }
+}
+
+/// Event `k` of session `s`: every fourth is a voxel new to the map.
+fn change_event(s: i64, k: usize) -> ChangeEvent {
+    ChangeEvent {
+        session_id: s,
+        voxel_id: 1000 + k as i64,
+        xyz_m: [k as f64 * 0.37 - 4.0, (k % 5) as f64 * -1.3, 0.1 * s as f64],
+        category: Category::ALL[1 + k % 5],
+        eps_g_before: (!k.is_multiple_of(4)).then_some(0.3 + (k % 3) as f32 * 0.1),
+        eps_g_after: 0.2 + (k % 6) as f32 * 0.1,
+    }
+}
+
+/// A store with three sessions and their graph versions, a lifelong map of
+/// [`VOXELS`] voxels on session 3's version, and [`EVENTS`] change events;
+/// and its writer, still open (see [`setup`]).
+fn setup_lifelong(tmp: &Path) -> (std::path::PathBuf, Store) {
+    let root = tmp.join("site.seam");
+    init_store(&root);
+    let mut store = Store::open(&root).unwrap();
+    store
+        .transaction(|tx| -> Result<(), StoreError> {
+            let mut last_version = 0;
+            for i in 1..=3 {
+                let name = format!("s{i}");
+                let ns = NewSession {
+                    name: &name,
+                    content_hash: &name,
+                    source_dir: "/nowhere",
+                    layout: "kitti",
+                    date: None,
+                    sensor_model: None,
+                    fov_json: None,
+                    keyframe_count: 12,
+                    point_count: 1000,
+                };
+                let sid = insert_session(tx, &ns)?;
+                last_version = insert_graph_version(tx, sid, "session", "{}", None, &[], &[])?;
+                let events: Vec<ChangeEvent> =
+                    (0..if i == 1 { 0 } else { EVENTS[i as usize - 2] }).map(|k| change_event(i, k)).collect();
+                insert_change_events(tx, &events)?;
+                let c = SessionChanges { events: events.len(), lifelong_voxels: VOXELS, ..SessionChanges::default() };
+                insert_session_changes(tx, sid, last_version, &c)?;
+            }
+            let (map, merged) = LifelongMap::from_voxels((0..VOXELS).map(map_voxel).collect(), VOXEL_M);
+            assert_eq!(merged, 0);
+            replace_lifelong_map(tx, &map, last_version, SessionId(3))
+        })
+        .unwrap();
+    (root, store)
+}
+
+/// A Parquet file's Arrow schema and its rows as one batch (files here are
+/// small: one batch holds them).
+fn read_parquet(path: &Path) -> (arrow_schema::SchemaRef, Option<RecordBatch>) {
+    let b = ParquetRecordBatchReaderBuilder::try_new(std::fs::File::open(path).unwrap()).unwrap();
+    let schema = b.schema().clone();
+    let batches: Vec<RecordBatch> = b.with_batch_size(1 << 20).build().unwrap().map(|b| b.unwrap()).collect();
+    assert!(batches.len() <= 1, "{}", batches.len());
+    (schema, batches.into_iter().next())
+}
+
+fn columns(schema: &arrow_schema::Schema) -> Vec<String> {
+    schema.fields().iter().map(|f| format!("{}:{}:{}", f.name(), f.data_type(), f.is_nullable())).collect()
+}
+
+fn col<'a, T: 'static>(b: &'a RecordBatch, name: &str) -> &'a T {
+    b.column_by_name(name).unwrap_or_else(|| panic!("no column {name}")).as_any().downcast_ref::<T>().unwrap()
+}
+
+const MAP_COLUMNS: [&str; 16] = [
+    "voxel_id:Int64:false",
+    "kx:Int32:false",
+    "ky:Int32:false",
+    "kz:Int32:false",
+    "x_m:Float64:false",
+    "y_m:Float64:false",
+    "z_m:Float64:false",
+    "eps_g:Float32:false",
+    "eps_l:Float32:false",
+    "points:Int32:false",
+    "first_session:Int32:false",
+    "last_seen_session:Int32:false",
+    "category:Utf8:false",
+    "category_session:Int32:false",
+    "owner_session:Int32:false",
+    "owner_keyframe:Int32:false",
+];
+
+const CHANGE_COLUMNS: [&str; 8] = [
+    "event_id:Int64:false",
+    "voxel_id:Int64:false",
+    "x_m:Float64:false",
+    "y_m:Float64:false",
+    "z_m:Float64:false",
+    "category:Utf8:false",
+    "eps_g_before:Float32:true",
+    "eps_g_after:Float32:false",
+];
+
+/// The voxel ids of a map file, checking the rows are in spatial order.
+fn map_ids_in_spatial_order(b: &RecordBatch) -> Vec<i64> {
+    let (kx, ky, kz) = (col::<Int32Array>(b, "kx"), col::<Int32Array>(b, "ky"), col::<Int32Array>(b, "kz"));
+    let ids = col::<Int64Array>(b, "voxel_id");
+    let codes: Vec<(u64, i64)> =
+        (0..b.num_rows()).map(|r| (z_order([kx.value(r), ky.value(r), kz.value(r)]), ids.value(r))).collect();
+    assert!(codes.windows(2).all(|w| w[0] < w[1]), "rows are sorted by z-order, then id");
+    codes.iter().map(|c| c.1).collect()
+}
+
+fn catalog(out: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(out.join("_catalog.json")).unwrap()).unwrap()
+}
+
+fn table<'a>(cat: &'a serde_json::Value, name: &str) -> &'a serde_json::Value {
+    cat["tables"].as_array().unwrap().iter().find(|t| t["name"] == name).unwrap_or_else(|| panic!("{name}: {cat}"))
+}
+
+#[test]
+fn exports_static_map_lifelong_map_and_changes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (root, _writer) = setup_lifelong(tmp.path());
+    let out = tmp.path().join("out");
+    let o =
+        run(&["export", root.to_str().unwrap(), out.to_str().unwrap(), "--tables", "static_map,lifelong_map,changes"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = stdout(&o);
+    assert!(text.starts_with("table"), "{text}");
+    assert!(text.contains("lifelong_map") && text.contains("static_map"), "{text}");
+
+    assert_eq!(names(&out), ["_catalog.json", "changes", "lifelong_map", "static_map"], "only the outputs");
+    let all: Vec<MapVoxel> = (0..VOXELS).map(map_voxel).collect();
+    let statics: Vec<&MapVoxel> = all.iter().filter(|v| v.eps_g < 0.5).collect();
+    assert_eq!(statics.len(), VOXELS / 9 * 5 + 3, "fixture: ε_g 0.5 itself is not static");
+
+    // The lifelong map: every voxel, the documented columns, spatial order.
+    assert_eq!(names(&out.join("lifelong_map")), ["part-0.parquet"]);
+    let (schema, b) = read_parquet(&out.join("lifelong_map/part-0.parquet"));
+    assert_eq!(columns(&schema), MAP_COLUMNS);
+    let b = b.unwrap();
+    assert_eq!(b.num_rows(), VOXELS);
+    let mut ids = map_ids_in_spatial_order(&b);
+    ids.sort();
+    assert_eq!(ids, all.iter().map(|v| v.voxel_id).collect::<Vec<_>>());
+
+    // One known voxel, every field.
+    let want = map_voxel(123);
+    let r = (0..b.num_rows()).find(|&r| col::<Int64Array>(&b, "voxel_id").value(r) == want.voxel_id).unwrap();
+    let i32s = |c: &str| col::<Int32Array>(&b, c).value(r);
+    let f64s = |c: &str| col::<Float64Array>(&b, c).value(r);
+    let f32s = |c: &str| col::<Float32Array>(&b, c).value(r);
+    assert_eq!([i32s("kx"), i32s("ky"), i32s("kz")], want.key.0);
+    assert_eq!([f64s("x_m"), f64s("y_m"), f64s("z_m")], want.xyz_m, "centroids are float64, unrounded");
+    assert_eq!((f32s("eps_g"), f32s("eps_l")), (want.eps_g, want.eps_l));
+    assert_eq!(i32s("points") as u32, want.points);
+    assert_eq!(
+        ["first_session", "last_seen_session", "category_session", "owner_session"].map(|c| i32s(c) as i64),
+        [want.first_session, want.last_seen_session, want.category_session, want.owner_session]
+    );
+    assert_eq!(i32s("owner_keyframe") as u32, want.owner_keyframe);
+    assert_eq!(col::<StringArray>(&b, "category").value(r), want.category.as_str());
+
+    // The static map: exactly the voxels with ε_g < 0.5.
+    let (schema, b) = read_parquet(&out.join("static_map/part-0.parquet"));
+    assert_eq!(columns(&schema), MAP_COLUMNS);
+    let b = b.unwrap();
+    let mut ids = map_ids_in_spatial_order(&b);
+    ids.sort();
+    assert_eq!(ids, statics.iter().map(|v| v.voxel_id).collect::<Vec<_>>());
+    assert!(col::<Float32Array>(&b, "eps_g").values().iter().all(|&e| e < 0.5));
+
+    // Changes: one partition per session change detection ran for, the
+    // first session's empty but with the schema; ids follow ingest order.
+    assert_eq!(names(&out.join("changes")), ["session=1", "session=2", "session=3"]);
+    let mut next_id = 1;
+    for (s, n) in [(1, 0), (2, EVENTS[0]), (3, EVENTS[1])] {
+        let (schema, b) = read_parquet(&out.join(format!("changes/session={s}/part-0.parquet")));
+        assert_eq!(columns(&schema), CHANGE_COLUMNS, "session {s}");
+        let Some(b) = b else {
+            assert_eq!(n, 0, "session {s}");
+            continue;
+        };
+        assert_eq!(b.num_rows(), n, "session {s}");
+        let ids = col::<Int64Array>(&b, "event_id");
+        let (x, y, z) =
+            (col::<Float64Array>(&b, "x_m"), col::<Float64Array>(&b, "y_m"), col::<Float64Array>(&b, "z_m"));
+        let key = |r: usize| [x.value(r), y.value(r), z.value(r)].map(|c| (c / VOXEL_M).floor() as i32);
+        assert!((1..n).all(|r| (z_order(key(r - 1)), ids.value(r - 1)) < (z_order(key(r)), ids.value(r))));
+        let before = col::<Float32Array>(&b, "eps_g_before");
+        assert_eq!(before.null_count(), n.div_ceil(4), "session {s}: every fourth event is a new voxel");
+        for r in 0..n {
+            let k = (ids.value(r) - next_id) as usize;
+            let want = change_event(s, k);
+            assert_eq!(col::<Int64Array>(&b, "voxel_id").value(r), want.voxel_id);
+            assert_eq!([x.value(r), y.value(r), z.value(r)], want.xyz_m);
+            assert_eq!(col::<StringArray>(&b, "category").value(r), want.category.as_str());
+            assert_eq!(before.is_valid(r).then(|| before.value(r)), want.eps_g_before, "session {s} event {k}");
+            assert_eq!(col::<Float32Array>(&b, "eps_g_after").value(r), want.eps_g_after);
+        }
+        next_id += n as i64;
+    }
+
+    // The catalog describes each table: rows, columns, frame, filter.
+    let cat = catalog(&out);
+    let order: Vec<&str> = cat["tables"].as_array().unwrap().iter().map(|t| t["name"].as_str().unwrap()).collect();
+    assert_eq!(order, ["static_map", "lifelong_map", "changes"]);
+    let st = table(&cat, "static_map");
+    assert_eq!(st["row_count"], statics.len());
+    assert_eq!(st["filter"], "eps_g < 0.5");
+    assert_eq!(st["partition_by"].as_array().unwrap().len(), 0);
+    assert_eq!(st["partitions"][0]["path"], "static_map/part-0.parquet");
+    assert_eq!(st["partitions"][0]["graph_version"], 3);
+    let lm = table(&cat, "lifelong_map");
+    assert_eq!(lm["row_count"], VOXELS);
+    assert!(lm.get("filter").is_none(), "{lm}");
+    assert_eq!(lm["frame"], serde_json::json!({"name": "world", "crs": "local", "graph_version": 3, "voxel_m": 0.2}));
+    let cols: Vec<String> = lm["columns"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| format!("{}:{}:{}", c["name"].as_str().unwrap(), c["type"].as_str().unwrap(), c["nullable"]))
+        .collect();
+    assert_eq!(cols[0], "voxel_id:int64:false");
+    assert_eq!(cols[4], "x_m:float64:false");
+    assert_eq!(cols[12], "category:string:false");
+    assert!(lm["columns"][7]["description"].as_str().unwrap().contains("ephemerality"), "{lm}");
+    let ch = table(&cat, "changes");
+    assert_eq!(ch["row_count"], EVENTS[0] + EVENTS[1]);
+    assert_eq!(ch["partition_by"], serde_json::json!(["session"]));
+    assert_eq!(ch["frame"]["graph_version"], serde_json::Value::Null, "each partition names its own");
+    let parts = ch["partitions"].as_array().unwrap();
+    assert_eq!(parts.iter().map(|p| p["row_count"].as_u64().unwrap()).collect::<Vec<_>>(), [0, 40, 25]);
+    assert_eq!(parts[1]["session_name"], "s2");
+    assert_eq!(parts[1]["graph_version"], 2);
+    assert_eq!(parts[2]["path"], "changes/session=3/part-0.parquet");
+    let c = &ch["columns"][6];
+    assert_eq!(
+        (c["name"].as_str(), c["type"].as_str(), c["nullable"].as_bool()),
+        (Some("eps_g_before"), Some("float32"), Some(true))
+    );
+
+    // Existing tables are refused without --overwrite, nothing touched.
+    let before = snapshot_files(&out);
+    let o = run(&["export", root.to_str().unwrap(), out.to_str().unwrap(), "--tables", "lifelong_map"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("lifelong_map") && stderr(&o).contains("--overwrite"), "{}", stderr(&o));
+    assert_eq!(snapshot_files(&out), before);
+
+    // With it and another threshold, only static_map is replaced; the catalog
+    // keeps the other tables.
+    let config = tmp.path().join("seam.toml");
+    std::fs::write(&config, "[change]\nstatic_threshold = 0.3\n").unwrap();
+    let args =
+        ["export", root.to_str().unwrap(), out.to_str().unwrap(), "--tables", "static_map", "--overwrite", "--quiet"];
+    let o = run(&[&args[..], &["--config", config.to_str().unwrap(), "--format", "json"]].concat());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    let below = all.iter().filter(|v| (v.eps_g as f64) < 0.3).count();
+    assert_eq!(v["partitions"].as_array().unwrap().len(), 1, "{v}");
+    assert_eq!(v["partitions"][0]["rows"], below);
+    assert_eq!(v["partitions"][0]["session"], serde_json::Value::Null);
+    let (_, b) = read_parquet(&out.join("static_map/part-0.parquet"));
+    assert_eq!(b.unwrap().num_rows(), below);
+    let cat = catalog(&out);
+    assert_eq!(cat["tables"].as_array().unwrap().len(), 3);
+    assert_eq!(table(&cat, "static_map")["filter"], "eps_g < 0.3");
+    assert_eq!(table(&cat, "changes")["row_count"], EVENTS[0] + EVENTS[1]);
+    assert_eq!(names(&out), ["_catalog.json", "changes", "lifelong_map", "static_map"], "no staging folder left");
+}
+
+#[test]
+fn store_without_a_lifelong_map_exports_empty_tables_with_their_schema() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (root, _, _writer) = setup(tmp.path());
+    let out = tmp.path().join("out");
+    let tables = "point_labels,static_map,lifelong_map,changes";
+    let o = run(&["export", root.to_str().unwrap(), out.to_str().unwrap(), "--tables", tables]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("no lifelong map yet"), "{}", stderr(&o));
+    for t in ["static_map", "lifelong_map"] {
+        let (schema, b) = read_parquet(&out.join(format!("{t}/part-0.parquet")));
+        assert_eq!(columns(&schema), MAP_COLUMNS, "{t}");
+        assert!(b.is_none_or(|b| b.num_rows() == 0), "{t}");
+    }
+    // No session went through change detection: no partition yet.
+    assert!(names(&out.join("changes")).is_empty());
+    let cat = catalog(&out);
+    let order: Vec<&str> = cat["tables"].as_array().unwrap().iter().map(|t| t["name"].as_str().unwrap()).collect();
+    assert_eq!(order, ["point_labels", "static_map", "lifelong_map", "changes"]);
+    assert_eq!(table(&cat, "point_labels")["row_count"], 250 + 1234);
+    for t in ["static_map", "lifelong_map", "changes"] {
+        assert_eq!(table(&cat, t)["row_count"], 0, "{t}");
+        assert_eq!(table(&cat, t)["frame"]["graph_version"], serde_json::Value::Null, "{t}");
+    }
+    assert_eq!(table(&cat, "changes")["columns"].as_array().unwrap().len(), CHANGE_COLUMNS.len());
+}
+
+#[test]
+fn unknown_map_table_names_every_known_table() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (root, _writer) = setup_lifelong(tmp.path());
+    let out = tmp.path().join("out");
+    let o = run(&["export", root.to_str().unwrap(), out.to_str().unwrap(), "--tables", "static_map,change"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    let err = stderr(&o);
+    assert!(err.contains("\"change\""), "{err}");
+    assert!(err.contains("known tables: point_labels, static_map, lifelong_map, changes"), "{err}");
+    assert!(!out.exists(), "nothing is written");
+}
+
+/// Two simulated sessions through `seam ingest`, then every table: the
+/// export holds what the store holds. Before the ingest has a changes step
+/// the map is empty and this checks the empty export; after, the real one.
+#[test]
+#[cfg_attr(debug_assertions, ignore = "release only: cargo test --release")]
+fn ingested_site_exports_what_the_store_holds() {
+    let tmp = tempfile::tempdir().unwrap();
+    let sim = tmp.path().join("sim");
+    let o = run(&[
+        "simulate",
+        sim.to_str().unwrap(),
+        "--sessions",
+        "2",
+        "--keyframes",
+        "8",
+        "--seed",
+        "7",
+        "--format",
+        "json",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let summary: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    let root = tmp.path().join("site.seam");
+    init_store(&root);
+    for s in summary["sessions"].as_array().unwrap() {
+        let o = run(&["ingest", root.to_str().unwrap(), s["dir"].as_str().unwrap(), "--quiet"]);
+        assert!(o.status.success(), "{}", stderr(&o));
+    }
+    let out = tmp.path().join("out");
+    let tables = "point_labels,static_map,lifelong_map,changes";
+    let o = run(&["export", root.to_str().unwrap(), out.to_str().unwrap(), "--tables", tables, "--quiet"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+
+    let conn = rusqlite::Connection::open_with_flags(root.join("seam.db"), rusqlite::OpenFlags::SQLITE_OPEN_READ_ONLY)
+        .unwrap();
+    let count = |q: &str| conn.query_row(q, [], |r| r.get::<_, i64>(0)).unwrap() as usize;
+    let rows = |p: &Path| read_parquet(p).1.map_or(0, |b| b.num_rows());
+    let lifelong = count("SELECT count(*) FROM map_voxels");
+    let statics = count("SELECT count(*) FROM map_voxels WHERE eps_g < 0.5");
+    assert_eq!(rows(&out.join("lifelong_map/part-0.parquet")), lifelong);
+    assert_eq!(rows(&out.join("static_map/part-0.parquet")), statics);
+    let mut st =
+        conn.prepare("SELECT session_id, events, lifelong_voxels, static_voxels FROM session_changes").unwrap();
+    let summaries: Vec<(i64, usize, usize, usize)> = st
+        .query_map([], |r| {
+            Ok((r.get(0)?, r.get::<_, i64>(1)? as usize, r.get::<_, i64>(2)? as usize, r.get::<_, i64>(3)? as usize))
+        })
+        .unwrap()
+        .map(|r| r.unwrap())
+        .collect();
+    let cat = catalog(&out);
+    assert_eq!(table(&cat, "changes")["partitions"].as_array().unwrap().len(), summaries.len());
+    for &(s, events, _, _) in &summaries {
+        let want = count(&format!("SELECT count(*) FROM change_events WHERE session_id = {s}"));
+        assert_eq!(want, events, "session {s}: session_changes.events");
+        assert_eq!(rows(&out.join(format!("changes/session={s}/part-0.parquet"))), events, "session {s}");
+    }
+    // The newest session's summary counted the map as exported.
+    if let Some(&(_, _, lifelong_voxels, static_voxels)) = summaries.last() {
+        assert_eq!((lifelong, statics), (lifelong_voxels, static_voxels));
+        assert!(lifelong > 0);
+    } else {
+        eprintln!("notice: ingest has no changes step yet; checked the empty export only");
+        assert_eq!(lifelong, 0);
+    }
 }

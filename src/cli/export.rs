@@ -1,30 +1,45 @@
-//! `seam export site.seam OUT [--tables point_labels] [--overwrite]`
+//! `seam export site.seam OUT [--tables point_labels,static_map,lifelong_map,changes] [--overwrite]`
 //!
-//! Writes tables of a store as Hive-partitioned Parquet for analysts:
-//! `OUT/<table>/session=<id>/part-<k>.parquet`, plus `OUT/_catalog.json`
-//! naming every table's columns, types, partitions and row counts. DuckDB
-//! reads a table with `read_parquet('OUT/point_labels/*/*.parquet',
-//! hive_partitioning = true)`, pandas with `pd.read_parquet('OUT/point_labels')`.
+//! Writes tables of a store as Parquet for analysts, plus `OUT/_catalog.json`
+//! naming every table's columns, types, partitions, frame and row counts:
 //!
-//! The store is opened read-only, so an export may run beside an ingest.
-//! Each table is built in a hidden folder `OUT/.<table>.tmp-<pid>` (every
-//! file in it written under a temporary name, fsynced and renamed) and then
-//! renamed into place whole: an interrupted export never leaves a half file
-//! or a half table under the final names, only the hidden folder.
+//! | table | files | rows |
+//! |-------|-------|------|
+//! | `point_labels` | `point_labels/session=<id>/part-<k>.parquet` | every scan point's DOR label |
+//! | `static_map` | `static_map/part-0.parquet` | map voxels with `eps_g < [change] static_threshold` |
+//! | `lifelong_map` | `lifelong_map/part-0.parquet` | every map voxel |
+//! | `changes` | `changes/session=<id>/part-0.parquet` | every change event, one file per session change detection ran for |
+//!
+//! Session-partitioned tables follow DESIGN.md's Hive layout; the session is
+//! the partition key, not a column in the files. The two maps are one current
+//! state (on the newest graph version), not per session, so they are one file
+//! each. DuckDB reads `read_parquet('OUT/changes/*/*.parquet', hive_partitioning
+//! = true)` or `read_parquet('OUT/static_map/*.parquet')`, pandas
+//! `pd.read_parquet('OUT/changes')`.
+//!
+//! The store is opened read-only, so an export may run beside an ingest; the
+//! map tables are read in one snapshot. Each table is built in a hidden folder
+//! `OUT/.<table>.tmp-<pid>` (every file in it written under a temporary name,
+//! fsynced and renamed) and then renamed into place whole: an interrupted
+//! export never leaves a half file or a half table under the final names,
+//! only the hidden folder.
 
 use super::output::{json, log, print_json, print_table, thousands};
 use super::{Ctx, UsageError};
 use crate::store::evidence_files::{
     SessionFile, export_point_labels, point_labels_schema, read_point_labels, session_files,
 };
+use crate::store::map_export::{
+    MapExport, changes_schema, export_changes, export_map_voxels, map_voxels_schema, read_map_export,
+};
 use crate::store::{Store, StoreError, now_utc};
-use arrow_schema::{DataType, Schema};
+use arrow_schema::{DataType, SchemaRef};
 use clap::Args;
 use std::fs::File;
 use std::path::{Path, PathBuf};
 
 /// Tables `seam export` knows, in catalog order.
-pub const KNOWN_TABLES: &[&str] = &["point_labels"];
+pub const KNOWN_TABLES: &[&str] = &["point_labels", "static_map", "lifelong_map", "changes"];
 
 #[derive(Debug, Args)]
 pub struct ExportArgs {
@@ -32,7 +47,7 @@ pub struct ExportArgs {
     pub store: PathBuf,
     /// Folder to write into (created if missing).
     pub out: PathBuf,
-    /// Comma-separated tables to export [known: point_labels].
+    /// Comma-separated tables to export [known: point_labels, static_map, lifelong_map, changes].
     #[arg(long, value_delimiter = ',', default_value = "point_labels")]
     pub tables: Vec<String>,
     /// Replace tables OUT already holds (otherwise an existing OUT/<table> is refused).
@@ -40,11 +55,17 @@ pub struct ExportArgs {
     pub overwrite: bool,
 }
 
-/// One written partition file.
+/// One written file.
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 struct Partition {
-    session: i64,
-    session_name: String,
+    /// The Hive partition; `None` for tables that are not partitioned.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    session: Option<i64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    session_name: Option<String>,
+    /// The graph version the file's positions are on, for positional tables.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    graph_version: Option<i64>,
     /// Relative to OUT, `/`-separated.
     path: String,
     row_count: u64,
@@ -58,21 +79,60 @@ struct Column {
     #[serde(rename = "type")]
     type_name: String,
     nullable: bool,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    description: Option<String>,
+}
+
+/// The frame positional columns (`x_m`, `y_m`, `z_m`) are in.
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+struct Frame {
+    /// Always `world`: the store's world frame (what `seam poses` prints).
+    name: String,
+    /// The store's CRS (`local` or an EPSG code).
+    crs: String,
+    /// The graph version positions are on; `None` where it differs per
+    /// partition (each partition names its own).
+    graph_version: Option<i64>,
+    /// Edge of the voxel grid `kx`/`ky`/`kz` count in, metres.
+    voxel_m: f64,
 }
 
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 struct TableEntry {
     name: String,
+    description: String,
     /// Relative to OUT.
     path: String,
     partition_by: Vec<String>,
     columns: Vec<Column>,
     row_count: u64,
+    /// How rows are ordered within each file.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    sorted_by: Option<String>,
+    /// The row filter that defines the table, if any.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    filter: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    frame: Option<Frame>,
     partitions: Vec<Partition>,
 }
 
+/// What a table is, before its files are written.
+struct TableSpec {
+    name: &'static str,
+    description: &'static str,
+    schema: SchemaRef,
+    partition_by: &'static [&'static str],
+    sorted_by: Option<&'static str>,
+    filter: Option<String>,
+    frame: Option<Frame>,
+}
+
+const SPATIAL_SORT: &str = "z-order (Morton) of the voxel key, then id";
+
 pub fn run(ctx: &Ctx, a: ExportArgs) -> anyhow::Result<()> {
-    // Everything the user can get wrong is refused before anything is written.
+    // Everything the user can get wrong is refused, and everything read,
+    // before anything is written.
     let tables = parse_tables(&a.tables)?;
     let store = Store::open_read_only(&a.store)?;
     for t in &tables {
@@ -85,13 +145,66 @@ pub fn run(ctx: &Ctx, a: ExportArgs) -> anyhow::Result<()> {
             .into());
         }
     }
+    let meta = store.meta()?;
+    let map = if tables.iter().any(|t| t != "point_labels") { Some(read_map_export(&store)?) } else { None };
     std::fs::create_dir_all(&a.out).map_err(|e| StoreError::io(&a.out, e))?;
 
+    let threshold = ctx.config.change.static_threshold;
     let mut entries = Vec::new();
     for t in &tables {
-        let entry = match t.as_str() {
-            "point_labels" => export_table(ctx, &store, &a.out, t, &point_labels_schema())?,
-            other => return Err(UsageError(format!("unknown table {other:?}")).into()),
+        let entry = match (t.as_str(), &map) {
+            ("point_labels", _) => {
+                let spec = TableSpec {
+                    name: "point_labels",
+                    description: "DOR label of every scan point of each session (keyframe, index in its scan)",
+                    schema: point_labels_schema(),
+                    partition_by: &["session"],
+                    sorted_by: Some("keyframe, point_index"),
+                    filter: None,
+                    frame: None,
+                };
+                export_table(&a.out, spec, |staging| write_point_labels(ctx, &store, staging))?
+            }
+            ("static_map", Some(map)) => {
+                let voxels = map.static_voxels(threshold);
+                let spec = TableSpec {
+                    name: "static_map",
+                    description: "voxels of the lifelong map that are static: global ephemerality below the threshold",
+                    schema: map_voxels_schema(),
+                    partition_by: &[],
+                    sorted_by: Some(SPATIAL_SORT),
+                    filter: Some(format!("eps_g < {threshold}")),
+                    frame: Some(map_frame(&meta.crs, map)),
+                };
+                export_table(&a.out, spec, |staging| write_map(ctx, map, staging, "static_map", &voxels))?
+            }
+            ("lifelong_map", Some(map)) => {
+                let voxels: Vec<_> = map.voxels.iter().collect();
+                let spec = TableSpec {
+                    name: "lifelong_map",
+                    description: "every voxel any session's cleaned map had, with its global ephemerality and history",
+                    schema: map_voxels_schema(),
+                    partition_by: &[],
+                    sorted_by: Some(SPATIAL_SORT),
+                    filter: None,
+                    frame: Some(map_frame(&meta.crs, map)),
+                };
+                export_table(&a.out, spec, |staging| write_map(ctx, map, staging, "lifelong_map", &voxels))?
+            }
+            ("changes", Some(map)) => {
+                let spec = TableSpec {
+                    name: "changes",
+                    description: "every change a session saw at a map voxel (emerged, deleted, back again)",
+                    schema: changes_schema(),
+                    partition_by: &["session"],
+                    sorted_by: Some(SPATIAL_SORT),
+                    filter: None,
+                    // Events keep the positions of their own session's ingest.
+                    frame: Some(Frame { graph_version: None, ..map_frame(&meta.crs, map) }),
+                };
+                export_table(&a.out, spec, |staging| write_changes(ctx, map, staging))?
+            }
+            (other, _) => return Err(UsageError(format!("unknown table {other:?}")).into()),
         };
         entries.push(entry);
     }
@@ -117,10 +230,23 @@ pub fn run(ctx: &Ctx, a: ExportArgs) -> anyhow::Result<()> {
     }
     let rows: Vec<Vec<String>> = parts
         .iter()
-        .map(|(t, p)| vec![t.to_string(), p.session.to_string(), thousands(p.row_count), thousands(p.size_bytes)])
+        .map(|(t, p)| {
+            let session = p.session.map_or_else(|| "-".to_string(), |s| s.to_string());
+            vec![t.to_string(), session, thousands(p.row_count), thousands(p.size_bytes)]
+        })
         .collect();
     print_table(&["table", "session", "rows", "bytes"], &rows);
     Ok(())
+}
+
+/// The frame of the map tables: the world frame of the map's graph version.
+fn map_frame(crs: &str, map: &MapExport) -> Frame {
+    Frame {
+        name: "world".into(),
+        crs: crs.to_string(),
+        graph_version: map.state.map(|s| s.graph_version),
+        voxel_m: map.voxel_m,
+    }
 }
 
 /// The requested tables, deduplicated in the order given; unknown names are
@@ -144,7 +270,7 @@ fn parse_tables(raw: &[String]) -> Result<Vec<String>, UsageError> {
     Ok(out)
 }
 
-/// Arrow type names as analysts know them (`int32`, `float32`, `boolean`).
+/// Arrow type names as analysts know them (`int32`, `float32`, `boolean`, `string`).
 fn type_name(t: &DataType) -> String {
     match t {
         DataType::Int32 => "int32".into(),
@@ -152,19 +278,27 @@ fn type_name(t: &DataType) -> String {
         DataType::Float32 => "float32".into(),
         DataType::Float64 => "float64".into(),
         DataType::Boolean => "boolean".into(),
+        DataType::Utf8 => "string".into(),
         other => other.to_string().to_lowercase(),
     }
 }
 
-/// Exports one table, staged in a hidden folder and renamed into place.
-fn export_table(ctx: &Ctx, store: &Store, out: &Path, table: &str, schema: &Schema) -> anyhow::Result<TableEntry> {
+/// Exports one table: `write` fills a hidden staging folder (returning the
+/// partitions with their paths as they will be after the rename), which is
+/// then renamed into place whole.
+fn export_table(
+    out: &Path,
+    spec: TableSpec,
+    write: impl FnOnce(&Path) -> anyhow::Result<Vec<Partition>>,
+) -> anyhow::Result<TableEntry> {
+    let table = spec.name;
     let pid = std::process::id();
     let staging = out.join(format!(".{table}.tmp-{pid}"));
     if staging.exists() {
         std::fs::remove_dir_all(&staging).map_err(|e| StoreError::io(&staging, e))?;
     }
     std::fs::create_dir_all(&staging).map_err(|e| StoreError::io(&staging, e))?;
-    let parts = match write_partitions(ctx, store, &staging, table) {
+    let parts = match write(&staging) {
         Ok(p) => p,
         Err(e) => {
             let _ = std::fs::remove_dir_all(&staging);
@@ -185,24 +319,35 @@ fn export_table(ctx: &Ctx, store: &Store, out: &Path, table: &str, schema: &Sche
         std::fs::rename(&staging, &final_dir).map_err(|e| StoreError::io(&final_dir, e))?;
         sync_dir(out)?;
     }
-    let columns = schema
+    let columns = spec
+        .schema
         .fields()
         .iter()
-        .map(|f| Column { name: f.name().clone(), type_name: type_name(f.data_type()), nullable: f.is_nullable() })
+        .map(|f| Column {
+            name: f.name().clone(),
+            type_name: type_name(f.data_type()),
+            nullable: f.is_nullable(),
+            description: f.metadata().get("description").cloned(),
+        })
         .collect();
     Ok(TableEntry {
         name: table.to_string(),
+        description: spec.description.to_string(),
         path: table.to_string(),
-        partition_by: vec!["session".into()],
+        partition_by: spec.partition_by.iter().map(|p| p.to_string()).collect(),
         columns,
         row_count: parts.iter().map(|p| p.row_count).sum(),
+        sorted_by: spec.sorted_by.map(str::to_string),
+        filter: spec.filter,
+        frame: spec.frame,
         partitions: parts,
     })
 }
 
-/// Writes `staging/session=<id>/part-<k>.parquet` for every stored file of
-/// the table; paths in the result are as they will be after the rename.
-fn write_partitions(ctx: &Ctx, store: &Store, staging: &Path, table: &str) -> anyhow::Result<Vec<Partition>> {
+/// Writes `staging/session=<id>/part-<k>.parquet` for every stored point
+/// labels file; paths in the result are as they will be after the rename.
+fn write_point_labels(ctx: &Ctx, store: &Store, staging: &Path) -> anyhow::Result<Vec<Partition>> {
+    let table = "point_labels";
     let files = session_files(store, table)?;
     if files.is_empty() {
         log(ctx, format!("{table}: no session has this table yet; writing an empty table"));
@@ -221,8 +366,61 @@ fn write_partitions(ctx: &Ctx, store: &Store, staging: &Path, table: &str) -> an
         let written = export_point_labels(&staging.join(&rel), &labels)?;
         log(ctx, format!("{table}: session {} ({session_name}): {} rows", session_id.0, thousands(written.row_count)));
         parts.push(Partition {
-            session: session_id.0,
-            session_name: session_name.clone(),
+            session: Some(session_id.0),
+            session_name: Some(session_name.clone()),
+            graph_version: None,
+            path: format!("{table}/{rel}"),
+            row_count: written.row_count,
+            size_bytes: written.size_bytes,
+            blake3: written.blake3,
+        });
+    }
+    Ok(parts)
+}
+
+/// Writes `staging/part-0.parquet` with `voxels`, even none (an empty file
+/// still carries the schema).
+fn write_map(
+    ctx: &Ctx,
+    map: &MapExport,
+    staging: &Path,
+    table: &str,
+    voxels: &[&crate::change::MapVoxel],
+) -> anyhow::Result<Vec<Partition>> {
+    if map.state.is_none() {
+        log(ctx, format!("{table}: the store has no lifelong map yet; writing an empty table"));
+    }
+    let rel = "part-0.parquet";
+    let written = export_map_voxels(&staging.join(rel), voxels)?;
+    log(ctx, format!("{table}: {} rows", thousands(written.row_count)));
+    Ok(vec![Partition {
+        session: None,
+        session_name: None,
+        graph_version: map.state.map(|s| s.graph_version),
+        path: format!("{table}/{rel}"),
+        row_count: written.row_count,
+        size_bytes: written.size_bytes,
+        blake3: written.blake3,
+    }])
+}
+
+/// Writes `staging/session=<id>/part-0.parquet` for every session change
+/// detection ran for, even one without events (the first session never has
+/// any: there was nothing to compare it with).
+fn write_changes(ctx: &Ctx, map: &MapExport, staging: &Path) -> anyhow::Result<Vec<Partition>> {
+    let table = "changes";
+    if map.sessions.is_empty() {
+        log(ctx, format!("{table}: no session has been through change detection yet; writing an empty table"));
+    }
+    let mut parts = Vec::new();
+    for s in &map.sessions {
+        let rel = format!("session={}/part-0.parquet", s.session_id.0);
+        let written = export_changes(&staging.join(&rel), map.events_of(s.session_id))?;
+        log(ctx, format!("{table}: session {} ({}): {} rows", s.session_id.0, s.name, thousands(written.row_count)));
+        parts.push(Partition {
+            session: Some(s.session_id.0),
+            session_name: Some(s.name.clone()),
+            graph_version: s.graph_version,
             path: format!("{table}/{rel}"),
             row_count: written.row_count,
             size_bytes: written.size_bytes,
@@ -302,5 +500,8 @@ mod tests {
         assert!(err.contains("\"bogus\"") && err.contains("known tables: point_labels"), "{err}");
         assert!(parse_tables(&s(&[""])).is_err());
         assert_eq!(type_name(&DataType::Boolean), "boolean");
+        assert_eq!(type_name(&DataType::Utf8), "string");
+        let err = parse_tables(&s(&["changes", "lifelong"])).unwrap_err().to_string();
+        assert!(err.contains("known tables: point_labels, static_map, lifelong_map, changes"), "{err}");
     }
 }

@@ -17,6 +17,7 @@ mod ingest;
 mod init;
 mod output;
 mod poses;
+mod rebuild;
 mod sessions;
 mod simulate;
 
@@ -77,6 +78,8 @@ pub enum Command {
     Eval(eval::EvalCommand),
     /// Write tables of a store as Parquet for analysts.
     Export(export::ExportArgs),
+    /// Recompute a store from the raw scans into a new store (same sessions, order, names).
+    Rebuild(rebuild::RebuildArgs),
 }
 
 /// Shared settings resolved once from the global flags.
@@ -127,5 +130,6 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Demo(a) => demo::run(&ctx, a),
         Command::Eval(c) => eval::run(&ctx, c),
         Command::Export(a) => export::run(&ctx, a),
+        Command::Rebuild(a) => rebuild::run(&ctx, a),
     }
 }

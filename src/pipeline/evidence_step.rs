@@ -62,8 +62,13 @@ pub(super) fn evidence(ctx: &mut StepCtx<'_>, step: &'static str, seq: i64) -> R
             points: pts,
         })
         .collect();
+    // The lifelong map's voxels, moved to this version, are kept as interest
+    // too: change detection asks whether this session saw them free.
+    let (map, _) = super::changes_step::placed_map(ctx.store.conn(), version)?;
+    let map_keys = map.packed_keys();
+    drop(map);
     ctx.progress.begin("ray cast", inputs.len() as u64);
-    let out = session::generate(&inputs, &[], cfg, |_| ctx.progress.advance(1));
+    let out = session::generate(&inputs, &map_keys, cfg, |_| ctx.progress.advance(1));
     ctx.progress.end();
     drop(inputs);
     drop(scans);
@@ -135,6 +140,7 @@ pub(super) fn evidence(ctx: &mut StepCtx<'_>, step: &'static str, seq: i64) -> R
         "points": st.points,
         "dynamic_points": st.dynamic_points,
         "interest_voxels": st.interest_voxels,
+        "map_interest_voxels": map_keys.len(),
         "generated_voxels": st.generated_voxels,
         "dynamic_voxels": st.dynamic_voxels,
         "cleaned_voxels": st.cleaned_voxels,

@@ -6,17 +6,22 @@
 //! resumes at the first step without a row. Re-ingesting a session whose
 //! content hash is already stored and complete is a no-op.
 //!
-//! Steps today (MATH.md section in brackets):
+//! Steps (MATH.md section in brackets; [`steps::STEPS`] is the list):
 //! 1. `scans`         store every scan and its odometry pose (§1)
 //! 2. `submaps`       cut the trajectory by travel distance (§1)
-//! 3. `initial_graph` a graph version from odometry: anchors at each submap's
-//!    first keyframe, local poses relative to it (§1); later steps replace it
-//!    with aligned and optimised versions (§2-5)
-//!
-//! Alignment, evidence and change detection plug in as further [`Step`]s.
+//! 3. `coarse_align`  place the session against the earlier ones (§2)
+//! 4. `loops`         inter-session loop closures, DOP-tested (§3-4)
+//! 5. `optimize`      the pose graph with submap anchors: a new graph version (§5)
+//! 6. `evidence`      ray cast the new session only, DOR, store evidence and
+//!    cleaned maps; reproject earlier sessions' evidence (§6-7)
+//! 7. `changes`       fold the session into the lifelong map: categories,
+//!    ε_g, change events (§8)
+//! 8. `complete`      mark the session complete
 
+mod changes_step;
 mod evidence_step;
 mod ingest;
+pub mod rebuild;
 mod steps;
 mod submaps;
 

@@ -31,6 +31,7 @@ pub(super) const STEPS: &[Step] = &[
     Step { name: "loops", run: find_loops },
     Step { name: "optimize", run: optimize_graph },
     Step { name: "evidence", run: super::evidence_step::evidence },
+    Step { name: "changes", run: super::changes_step::changes },
     Step { name: "complete", run: complete },
 ];
 

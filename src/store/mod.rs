@@ -26,6 +26,8 @@ mod check;
 pub mod evidence_files;
 mod evidence_rows;
 mod files;
+mod lifelong;
+pub mod map_export;
 mod rows;
 mod schema;
 
@@ -33,6 +35,7 @@ pub use alignment::*;
 pub use check::{CheckReport, FileProblem};
 pub use evidence_rows::*;
 pub use files::{FileRecord, ScanWriter, file_paths, insert_file, read_scan_row_group};
+pub use lifelong::*;
 pub use rows::*;
 pub use schema::{SCHEMA_SQL, SCHEMA_VERSION};
 

@@ -1,0 +1,470 @@
+//! ELite's categories with seam's evidence, and the ε_g update (MATH.md §8).
+//!
+//! For every key of the lifelong map L (moved to the current version) and of
+//! the new session's cleaned map N:
+//!
+//! | key | category | ε_g |
+//! |---|---|---|
+//! | in L, an N voxel within τ_c | coexist | `B(ε_g, ε_l)` |
+//! | in N only, an L voxel within τ_c | coexist (joins the map) | `B(ε_g of that L voxel, ε_l)` |
+//! | in L only, new session freed it (`n_free > 0`) | deleted, overlap | `B(ε_g, ½ + ½ω_free)` ([`deleted_factor`]) |
+//! | in L only, not freed | deleted, non-overlap | unchanged |
+//! | in N only, a coexist voxel within τ_o | emerged, overlap | `η (2 − ω_hit) ε_l` |
+//! | in N only, none | emerged, non-overlap | `ε_l` |
+//!
+//! "Within τ_c" is the voxel or its neighbours up to `round(τ_c / v) − 1`
+//! voxels away (the 26-neighbourhood at ELite's τ_c = 0.4 m, v = 0.2 m).
+//!
+//! Deleted voxels use seam's evidence as MATH.md says: overlap means the new
+//! session's rays actually crossed the voxel. Emerged voxels use ELite's
+//! distance rule (a coexist voxel within τ_o), a documented deviation: the
+//! earlier sessions' evidence is kept only at voxels some point occupied
+//! (`evidence::grid`), so "earlier sessions saw this space free" is not
+//! stored for space that was empty then — exactly where things emerge.
+//!
+//! Events (`ChangeEvent`) record what a person asking "what changed" wants:
+//! every emerged and deleted-with-overlap voxel, a voxel seen again right
+//! after a deleted-with-overlap (it came back), and the first
+//! deleted-non-overlap of a run (it left the area sessions cover).
+
+use super::lifelong::{Category, ChangeEvent, LifelongMap, MapVoxel};
+use crate::evidence::grid::{pack, unpack};
+use crate::geometry::VoxelKey;
+use crate::registration::kdtree::{KdTree, to_f32};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+/// Change detection settings (MATH.md §8; ELite's defaults).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ChangeConfig {
+    /// Coexistence distance τ_c, metres.
+    pub tau_c_m: f64,
+    /// Overlap distance τ_o for emerged voxels, metres.
+    pub tau_o_m: f64,
+    /// η of the emerged-overlap update.
+    pub eta: f64,
+    /// ε_g is clamped to `[eps_g_min, eps_g_max]` after every update.
+    pub eps_g_min: f64,
+    pub eps_g_max: f64,
+    /// The static map is the voxels with ε_g below this.
+    pub static_threshold: f64,
+}
+
+impl Default for ChangeConfig {
+    fn default() -> Self {
+        ChangeConfig { tau_c_m: 0.4, tau_o_m: 2.0, eta: 2.0, eps_g_min: 0.1, eps_g_max: 0.9, static_threshold: 0.5 }
+    }
+}
+
+impl ChangeConfig {
+    pub fn validate(&self) -> Result<(), String> {
+        let pos = |name: &str, v: f64| {
+            if v.is_finite() && v > 0.0 { Ok(()) } else { Err(format!("[change] {name} must be > 0, got {v}")) }
+        };
+        pos("tau_c_m", self.tau_c_m)?;
+        pos("tau_o_m", self.tau_o_m)?;
+        pos("eta", self.eta)?;
+        let unit = |name: &str, v: f64| {
+            if (0.0..=1.0).contains(&v) { Ok(()) } else { Err(format!("[change] {name} must be in [0, 1], got {v}")) }
+        };
+        unit("eps_g_min", self.eps_g_min)?;
+        unit("eps_g_max", self.eps_g_max)?;
+        unit("static_threshold", self.static_threshold)?;
+        if self.eps_g_min >= self.eps_g_max {
+            return Err(format!(
+                "[change] eps_g_min ({}) must be below eps_g_max ({})",
+                self.eps_g_min, self.eps_g_max
+            ));
+        }
+        Ok(())
+    }
+
+    /// Neighbour radius in voxels that counts as "within τ_c".
+    fn coexist_radius(&self, voxel_m: f64) -> i32 {
+        ((self.tau_c_m / voxel_m).round() as i32 - 1).max(0)
+    }
+}
+
+/// One voxel of the new session's cleaned map, with the session's evidence
+/// there.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NewVoxel {
+    pub key: VoxelKey,
+    /// Centroid of the static points, world frame (current version).
+    pub xyz_m: [f64; 3],
+    pub eps_l: f32,
+    pub points: u32,
+    pub owner_keyframe: u32,
+    /// ω of the session's hit evidence at the voxel.
+    pub omega_hit: f32,
+}
+
+/// The new session's free evidence at a voxel: `(n_free, ω_free)`.
+pub type FreeAt<'a> = dyn Fn(u64) -> Option<(u32, f32)> + Sync + 'a;
+
+/// Counts of one session's update (SQLite's `session_changes`).
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize)]
+pub struct SessionChanges {
+    pub coexist: usize,
+    pub deleted_overlap: usize,
+    pub deleted_non_overlap: usize,
+    pub emerged_overlap: usize,
+    pub emerged_non_overlap: usize,
+    pub events: usize,
+    pub merged_on_move: usize,
+    pub lifelong_voxels: usize,
+    pub static_voxels: usize,
+}
+
+impl SessionChanges {
+    fn count(&mut self, c: Category) {
+        match c {
+            Category::Initial => {}
+            Category::Coexist => self.coexist += 1,
+            Category::DeletedOverlap => self.deleted_overlap += 1,
+            Category::DeletedNonOverlap => self.deleted_non_overlap += 1,
+            Category::EmergedOverlap => self.emerged_overlap += 1,
+            Category::EmergedNonOverlap => self.emerged_non_overlap += 1,
+        }
+    }
+}
+
+/// ELite's `B(a, b) = a b / (a b + (1 − a)(1 − b))`.
+pub fn bayes(a: f64, b: f64) -> f64 {
+    let d = a * b + (1.0 - a) * (1.0 - b);
+    if d <= 0.0 { 0.5 } else { a * b / d }
+}
+
+/// The factor a deleted-with-overlap voxel's ε_g is updated with:
+/// `0.5 + 0.5·ω_free` (choice). MATH.md puts ω_free where ELite has its
+/// objectness γ, but B(a, ω) with ω < 0.5 *lowers* ε_g, and B(a, 0) = 0:
+/// free evidence too one-sided to trust would make a vanished voxel more
+/// static than before. Mapped to `[0.5, 1]`, unreliable evidence leaves ε_g
+/// as it was and fully reliable evidence (ω = 1) removes the voxel at once.
+pub fn deleted_factor(omega_free: f32) -> f64 {
+    0.5 + 0.5 * (omega_free as f64).clamp(0.0, 1.0)
+}
+
+/// Sorted packed keys with a lookup, for neighbourhood queries.
+struct KeySet<'a>(&'a [u64]);
+
+impl KeySet<'_> {
+    fn find(&self, k: u64) -> Option<usize> {
+        self.0.binary_search(&k).ok()
+    }
+
+    /// Index of the key itself, else of the neighbour within `r` voxels
+    /// nearest to it (ties: lowest key).
+    fn nearest_within(&self, key: VoxelKey, r: i32) -> Option<usize> {
+        if let Some(i) = pack(key).and_then(|k| self.find(k)) {
+            return Some(i);
+        }
+        let mut best: Option<(i32, usize)> = None;
+        for dx in -r..=r {
+            for dy in -r..=r {
+                for dz in -r..=r {
+                    let d2 = dx * dx + dy * dy + dz * dz;
+                    if d2 == 0 || best.is_some_and(|(b, _)| b <= d2) {
+                        continue;
+                    }
+                    let k = VoxelKey([key.0[0] + dx, key.0[1] + dy, key.0[2] + dz]);
+                    if let Some(i) = pack(k).and_then(|k| self.find(k)) {
+                        best = Some((d2, i));
+                    }
+                }
+            }
+        }
+        best.map(|(_, i)| i)
+    }
+}
+
+/// Folds session `session` into the lifelong map. `map` must already be on
+/// the current graph version (see [`LifelongMap::moved`]) and `new` sorted
+/// by packed key with unique keys. `next_id` is the first id for voxels new
+/// to the map. An empty map is the first session: ε_g starts at ε_l and no
+/// events are recorded.
+pub fn update_map(
+    map: LifelongMap,
+    new: &[NewVoxel],
+    free_at: &FreeAt<'_>,
+    session: i64,
+    next_id: i64,
+    cfg: &ChangeConfig,
+) -> (LifelongMap, Vec<ChangeEvent>, SessionChanges) {
+    let v = map.voxel_m;
+    let clamp = |e: f64| e.clamp(cfg.eps_g_min, cfg.eps_g_max) as f32;
+    let first = map.is_empty();
+    let r = cfg.coexist_radius(v);
+    let l_keys: Vec<u64> = map.voxels.iter().filter_map(|x| pack(x.key)).collect();
+    let n_keys: Vec<u64> = new.iter().filter_map(|x| pack(x.key)).collect();
+    let (l_set, n_set) = (KeySet(&l_keys), KeySet(&n_keys));
+    let mut stats = SessionChanges::default();
+    let mut events = Vec::new();
+
+    // Every L voxel: coexist or deleted.
+    let l_match: Vec<Option<usize>> = map.voxels.par_iter().map(|x| n_set.nearest_within(x.key, r)).collect();
+    let mut out: Vec<MapVoxel> = Vec::with_capacity(map.len() + new.len());
+    for (x, m) in map.voxels.iter().zip(&l_match) {
+        let mut y = *x;
+        let category = match m {
+            Some(j) => {
+                let n = &new[*j];
+                y.eps_g = clamp(bayes(x.eps_g as f64, n.eps_l as f64));
+                if n.key == x.key {
+                    // The newest observation places the voxel from now on.
+                    y.xyz_m = n.xyz_m;
+                    y.points = n.points;
+                    y.owner_session = session;
+                    y.owner_keyframe = n.owner_keyframe;
+                }
+                y.eps_l = n.eps_l;
+                y.last_seen_session = session;
+                Category::Coexist
+            }
+            None => match pack(x.key).and_then(free_at) {
+                Some((n_free, omega_free)) if n_free > 0 => {
+                    y.eps_g = clamp(bayes(x.eps_g as f64, deleted_factor(omega_free)));
+                    Category::DeletedOverlap
+                }
+                _ => Category::DeletedNonOverlap,
+            },
+        };
+        stats.count(category);
+        let event = match category {
+            Category::DeletedOverlap => true,
+            Category::DeletedNonOverlap => x.category != Category::DeletedNonOverlap,
+            Category::Coexist => x.category == Category::DeletedOverlap,
+            _ => false,
+        };
+        if event {
+            events.push(ChangeEvent {
+                session_id: session,
+                voxel_id: x.voxel_id,
+                xyz_m: y.xyz_m,
+                category,
+                eps_g_before: Some(x.eps_g),
+                eps_g_after: y.eps_g,
+            });
+        }
+        y.category = category;
+        y.category_session = session;
+        out.push(y);
+    }
+
+    // N voxels not in L: coexist next to an L voxel, else emerged.
+    let coexist_pts: Vec<[f64; 3]> = out.iter().filter(|x| x.category == Category::Coexist).map(|x| x.xyz_m).collect();
+    let coexist_tree = KdTree::build(&coexist_pts);
+    let tau_o2 = (cfg.tau_o_m * cfg.tau_o_m) as f32;
+    let mut id = next_id;
+    for (n, &nk) in new.iter().zip(&n_keys) {
+        if l_set.find(nk).is_some() {
+            continue;
+        }
+        let neighbour = if first { None } else { l_set.nearest_within(n.key, r) };
+        let (category, eps_g, before) = if first {
+            (Category::Initial, clamp(n.eps_l as f64), None)
+        } else if let Some(i) = neighbour {
+            let prev = map.voxels[i].eps_g;
+            (Category::Coexist, clamp(bayes(prev as f64, n.eps_l as f64)), Some(prev))
+        } else if coexist_tree.nearest(&to_f32(&n.xyz_m)).is_some_and(|(_, d2)| d2 < tau_o2) {
+            let e = cfg.eta * (2.0 - n.omega_hit as f64) * n.eps_l as f64;
+            (Category::EmergedOverlap, clamp(e), None)
+        } else {
+            (Category::EmergedNonOverlap, clamp(n.eps_l as f64), None)
+        };
+        stats.count(category);
+        let voxel = MapVoxel {
+            voxel_id: id,
+            key: n.key,
+            xyz_m: n.xyz_m,
+            eps_g,
+            eps_l: n.eps_l,
+            points: n.points,
+            first_session: session,
+            last_seen_session: session,
+            category,
+            category_session: session,
+            owner_session: session,
+            owner_keyframe: n.owner_keyframe,
+        };
+        id += 1;
+        if matches!(category, Category::EmergedOverlap | Category::EmergedNonOverlap) {
+            events.push(ChangeEvent {
+                session_id: session,
+                voxel_id: voxel.voxel_id,
+                xyz_m: voxel.xyz_m,
+                category,
+                eps_g_before: before,
+                eps_g_after: eps_g,
+            });
+        }
+        out.push(voxel);
+    }
+    let (map, merged) = LifelongMap::from_voxels(out, v);
+    debug_assert_eq!(merged, 0, "L and N keys are disjoint");
+    stats.events = events.len();
+    stats.lifelong_voxels = map.len();
+    stats.static_voxels = map.static_count(cfg.static_threshold);
+    (map, events, stats)
+}
+
+/// Merges cleaned-map rows (several submaps can hold one voxel) into sorted
+/// unique [`NewVoxel`]s: point-weighted centroid, the owner of the larger
+/// share. `omega_hit_at` gives the session's ω_hit per packed key.
+pub fn new_voxels(
+    rows: impl IntoIterator<Item = ([f64; 3], f32, u32, u32)>,
+    voxel_m: f64,
+    omega_hit_at: impl Fn(u64) -> f32,
+) -> Vec<NewVoxel> {
+    let mut by_key: rustc_hash::FxHashMap<u64, (NewVoxel, u32)> = rustc_hash::FxHashMap::default();
+    for (xyz, eps_l, points, owner) in rows {
+        let Some(k) = crate::evidence::grid::packed_key(&xyz, voxel_m) else { continue };
+        let e = by_key.entry(k).or_insert((
+            NewVoxel { key: unpack(k), xyz_m: [0.0; 3], eps_l, points: 0, owner_keyframe: owner, omega_hit: 0.0 },
+            0,
+        ));
+        let total = e.0.points + points;
+        for (c, x) in e.0.xyz_m.iter_mut().zip(xyz) {
+            *c = (*c * e.0.points as f64 + x * points as f64) / total.max(1) as f64;
+        }
+        if points > e.1 {
+            e.1 = points;
+            e.0.owner_keyframe = owner;
+        }
+        e.0.points = total;
+        e.0.eps_l = e.0.eps_l.max(eps_l);
+    }
+    let mut out: Vec<(u64, NewVoxel)> = by_key
+        .into_iter()
+        .map(|(k, (mut n, _))| {
+            n.omega_hit = omega_hit_at(k);
+            (k, n)
+        })
+        .collect();
+    out.sort_unstable_by_key(|(k, _)| *k);
+    out.into_iter().map(|(_, n)| n).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::evidence::grid::packed_key;
+
+    fn nv(xyz: [f64; 3], eps_l: f32) -> NewVoxel {
+        NewVoxel {
+            key: unpack(packed_key(&xyz, 0.2).unwrap()),
+            xyz_m: xyz,
+            eps_l,
+            points: 5,
+            owner_keyframe: 0,
+            omega_hit: 0.5,
+        }
+    }
+
+    fn sorted(mut v: Vec<NewVoxel>) -> Vec<NewVoxel> {
+        v.sort_by_key(|n| pack(n.key).unwrap());
+        v
+    }
+
+    #[test]
+    fn bayes_is_elites_update() {
+        assert!((bayes(0.5, 0.8) - 0.8).abs() < 1e-12);
+        assert!((bayes(0.2, 0.2) - 0.04 / (0.04 + 0.64)).abs() < 1e-12);
+        assert_eq!(bayes(0.0, 1.0), 0.5);
+    }
+
+    #[test]
+    fn config_validation_names_the_key() {
+        let bad = ChangeConfig { eps_g_min: 0.9, eps_g_max: 0.1, ..Default::default() };
+        assert!(bad.validate().unwrap_err().contains("eps_g_min"));
+        let bad = ChangeConfig { tau_o_m: -1.0, ..Default::default() };
+        assert!(bad.validate().unwrap_err().contains("tau_o_m"));
+        assert!(ChangeConfig::default().validate().is_ok());
+    }
+
+    /// Three sessions over a wall and a box: the first initialises, the
+    /// second removes the box (seen free) and adds a crate next to the wall
+    /// and a shed far away, the third sees the box back.
+    #[test]
+    fn categories_updates_and_events_follow_the_table() {
+        let cfg = ChangeConfig::default();
+        let none: &FreeAt<'_> = &|_| None;
+        let wall: Vec<NewVoxel> = (0..20).map(|i| nv([i as f64 * 0.2 + 0.1, 0.1, 0.1], 0.1)).collect();
+        let boxv = nv([1.1, 1.1, 0.1], 0.1);
+        let mut s1 = wall.clone();
+        s1.push(boxv);
+        let (map, ev, st) = update_map(LifelongMap { voxel_m: 0.2, voxels: vec![] }, &sorted(s1), none, 1, 1, &cfg);
+        assert!(ev.is_empty());
+        assert_eq!((st.lifelong_voxels, st.static_voxels), (21, 21));
+        assert!(map.voxels.iter().all(|x| x.category == Category::Initial && (x.eps_g - 0.1).abs() < 1e-6));
+
+        // Session 2: the wall (one voxel seen one voxel off), no box (freed),
+        // a crate 1 m from the wall, a shed 30 m away.
+        let mut s2: Vec<NewVoxel> = wall[1..].to_vec();
+        s2.push(nv([0.1, 0.3, 0.1], 0.1)); // wall's first voxel, seen one up in y
+        s2.push(nv([2.1, 1.3, 0.1], 0.2)); // crate
+        s2.push(nv([30.1, 30.1, 0.1], 0.1)); // shed
+        let box_key = pack(boxv.key).unwrap();
+        let freed: &FreeAt<'_> = &move |k| (k == box_key).then_some((4, 0.95));
+        let (map, ev, st) = update_map(map, &sorted(s2), freed, 2, 100, &cfg);
+        assert_eq!(st.deleted_overlap, 1);
+        assert_eq!(st.deleted_non_overlap, 0);
+        assert_eq!((st.emerged_overlap, st.emerged_non_overlap), (1, 1));
+        // 20 wall voxels coexist, plus the off-by-one wall voxel joining as coexist.
+        assert_eq!(st.coexist, 21);
+        let at = |xyz: [f64; 3]| *map.voxels.iter().find(|x| x.key == unpack(packed_key(&xyz, 0.2).unwrap())).unwrap();
+        let b = at([1.1, 1.1, 0.1]);
+        assert_eq!(b.category, Category::DeletedOverlap);
+        assert!((b.eps_g as f64 - bayes(0.1, 0.975)).abs() < 1e-6, "{}", b.eps_g);
+        assert!(b.eps_g > 0.5, "reliable free evidence takes the box out of the static map");
+        let crate_ = at([2.1, 1.3, 0.1]);
+        assert_eq!(crate_.category, Category::EmergedOverlap);
+        assert!((crate_.eps_g as f64 - 2.0 * 1.5 * 0.2).abs() < 1e-6);
+        assert_eq!(at([30.1, 30.1, 0.1]).category, Category::EmergedNonOverlap);
+        let cats: Vec<Category> = ev.iter().map(|e| e.category).collect();
+        assert_eq!(ev.len(), 3, "{cats:?}");
+        assert!(ev.iter().all(|e| e.session_id == 2));
+        assert_eq!(ev.iter().filter(|e| e.eps_g_before.is_none()).count(), 2);
+
+        // Session 3: the box is back; the shed is not seen and not freed.
+        let mut s3 = wall.clone();
+        s3.push(boxv);
+        s3.push(nv([2.1, 1.3, 0.1], 0.1));
+        let (map, ev, st) = update_map(map, &sorted(s3), none, 3, 200, &cfg);
+        assert_eq!(st.deleted_non_overlap, 1, "the shed (the off-by-one wall voxel neighbours the wall)");
+        let back: Vec<&ChangeEvent> = ev.iter().filter(|e| e.category == Category::Coexist).collect();
+        assert_eq!(back.len(), 1);
+        assert_eq!(back[0].voxel_id, b.voxel_id);
+        assert_eq!(at_id(&map, b.voxel_id).category, Category::Coexist);
+        let shed = at_id_key(&map, [30.1, 30.1, 0.1]);
+        assert!(ev.iter().any(|e| e.category == Category::DeletedNonOverlap && e.voxel_id == shed));
+        // A second unseen session records no new event for the shed.
+        let (_, ev, _) = update_map(map, &sorted(wall.clone()), none, 4, 300, &cfg);
+        assert!(!ev.iter().any(|e| e.voxel_id == shed), "{ev:?}");
+    }
+
+    fn at_id_key(map: &LifelongMap, xyz: [f64; 3]) -> i64 {
+        map.voxels.iter().find(|x| x.key == unpack(packed_key(&xyz, 0.2).unwrap())).unwrap().voxel_id
+    }
+
+    fn at_id(map: &LifelongMap, id: i64) -> MapVoxel {
+        *map.voxels.iter().find(|x| x.voxel_id == id).unwrap()
+    }
+
+    #[test]
+    fn new_voxels_merge_submaps_by_key() {
+        let rows = vec![
+            ([0.05, 0.05, 0.05], 0.1f32, 2u32, 3u32),
+            ([0.15, 0.05, 0.05], 0.3, 6, 9),
+            ([1.0, 1.0, 1.0], 0.1, 1, 1),
+        ];
+        let n = new_voxels(rows, 0.2, |_| 0.7);
+        assert_eq!(n.len(), 2);
+        let a = n.iter().find(|x| x.key == VoxelKey([0, 0, 0])).unwrap();
+        assert_eq!((a.points, a.owner_keyframe), (8, 9));
+        assert!((a.xyz_m[0] - 0.125).abs() < 1e-12);
+        assert_eq!(a.eps_l, 0.3);
+        assert_eq!(a.omega_hit, 0.7);
+    }
+}
