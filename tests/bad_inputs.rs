@@ -283,3 +283,46 @@ fn bad_evidence_settings_and_dor_inputs() {
     assert!(stderr(&o).contains("no session named \"nope\""), "{}", stderr(&o));
     assert_same_state(&before, &store_state(&store), "after eval dor with bad inputs");
 }
+
+/// `seam eval changes`: a store without a lifelong map, and a `--gt` folder
+/// whose `objects.csv` is garbled or missing, are data errors (exit 4) that
+/// say what to run or name the file and line. The store is unchanged.
+#[test]
+fn bad_change_eval_inputs() {
+    let tmp = tempfile::tempdir().unwrap();
+    let sim = tmp.path().join("sim");
+    let o = run(&["simulate", sim.to_str().unwrap(), "--sessions", "1", "--keyframes", "2", "-q"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let store = tmp.path().join("site.seam");
+    init_store(&store);
+    let before = store_state(&store);
+    let (st, gt) = (store.to_str().unwrap(), sim.to_str().unwrap());
+    let eval = || run(&["eval", "changes", st, "--gt", gt]);
+
+    let o = eval();
+    assert_eq!(o.status.code(), Some(4), "{}", stderr(&o));
+    for f in ["no lifelong map", "hint:", "seam ingest"] {
+        assert!(stderr(&o).contains(f), "message lacks {f:?}:\n{}", stderr(&o));
+    }
+
+    let objects = sim.join("objects.csv");
+    let text = std::fs::read_to_string(&objects).unwrap();
+    let mut lines: Vec<String> = text.lines().map(String::from).collect();
+    let mut cells: Vec<&str> = lines[2].split(',').collect();
+    cells[4] = "east";
+    lines[2] = cells.join(",");
+    std::fs::write(&objects, lines.join("\n")).unwrap();
+    let o = eval();
+    assert_eq!(o.status.code(), Some(4), "{}", stderr(&o));
+    for f in ["objects.csv", "line 3", "`east` is not a number"] {
+        assert!(stderr(&o).contains(f), "message lacks {f:?}:\n{}", stderr(&o));
+    }
+
+    std::fs::remove_file(&objects).unwrap();
+    let o = eval();
+    assert_eq!(o.status.code(), Some(4), "{}", stderr(&o));
+    for f in ["objects.csv is missing", "hint:"] {
+        assert!(stderr(&o).contains(f), "message lacks {f:?}:\n{}", stderr(&o));
+    }
+    assert_same_state(&before, &store_state(&store), "after eval changes with bad inputs");
+}

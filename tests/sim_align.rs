@@ -41,7 +41,7 @@ fn sessions_are_aligned_jointly_within_a_decimetre() {
     for (k, s) in summary["sessions"].as_array().unwrap().iter().enumerate() {
         let r = json_of(&["ingest", st, s["dir"].as_str().unwrap(), "--format", "json"]);
         let steps: Vec<&str> = r["steps"].as_array().unwrap().iter().map(|s| s["step"].as_str().unwrap()).collect();
-        assert_eq!(steps, ["scans", "submaps", "coarse_align", "loops", "optimize", "evidence", "complete"]);
+        assert_eq!(steps, ["scans", "submaps", "coarse_align", "loops", "optimize", "evidence", "changes", "complete"]);
         let coarse = &r["steps"][2]["details"];
         let loops = &r["steps"][3]["details"];
         if k == 0 {
@@ -78,6 +78,27 @@ fn sessions_are_aligned_jointly_within_a_decimetre() {
     let mut lines = csv.lines();
     assert!(lines.next().unwrap().starts_with("session,keyframe,"));
     assert_eq!(lines.count(), 4 * 150);
+
+    // Change detection on the same site, against the simulator's objects.
+    // Removed objects' leftovers (goal ≤ 5 %) are not asserted: seam leaves
+    // too many of them static today (see `seam eval changes`).
+    let report = json_of(&["eval", "changes", st, "--gt", sim.to_str().unwrap(), "--format", "json"]);
+    let goal = |name: &str| {
+        let g = report["goals"].as_array().unwrap().iter().find(|g| g["metric"] == name).unwrap().clone();
+        (g["value"].as_f64().unwrap(), g["met"].as_bool().unwrap())
+    };
+    for name in [
+        "permanent structure in the static map",
+        "appeared objects present in the static map",
+        "mover voxels in the static map (share of it)",
+        "object changes with events in the right session",
+    ] {
+        let (value, met) = goal(name);
+        assert!(met, "{name}: {value:.4} misses its goal: {}", report["goals"]);
+    }
+    // Seeing a removed object's space free must lower what is left of it.
+    let (left, _) = goal("removed-object voxels left in the static map");
+    assert!(left < 0.9, "removed objects stay in the static map: {left:.3}");
 }
 
 /// A session that shares nothing with the store is kept, unaligned, with the

@@ -22,5 +22,5 @@
 pub mod detect;
 pub mod lifelong;
 
-pub use detect::{ChangeConfig, SessionChanges, update_map};
+pub use detect::{ChangeConfig, DeletedReliability, SessionChanges, update_map};
 pub use lifelong::{Category, ChangeEvent, LifelongMap, MapVoxel};

@@ -1,14 +1,20 @@
 //! `seam eval align site.seam --gt SIM_DIR [--compare-anchors]`
 //! `seam eval dor site.seam --labels SESSION_DIR [--session NAME] [--predicted PRED_DIR]`
+//! `seam eval changes site.seam --gt SIM_DIR`
 //!
 //! Alignment against a simulator's ground truth: per-session ATE (one
 //! Umeyama SE(3) fit over all sessions) and rigid residual (each session's
 //! own fit). `--compare-anchors` re-solves the store's graph after every
 //! ingest step in `fixed`, `session` and `submap` mode with the same loops:
 //! the paper's Table II.
+//!
+//! `changes` scores the lifelong map after the last ingested session against
+//! the simulator's objects (definitions in `eval::changes`).
 
+use super::output::thousands;
 use super::output::{print_json, print_table};
 use super::{Ctx, Format};
+use crate::eval::changes::{ChangeEvalConfig, ChangesReport, Fraction, Placement, changes_report};
 use crate::eval::dor::render_table;
 use crate::eval::{AlignReport, align_report, dor_report};
 use crate::store::Store;
@@ -22,6 +28,24 @@ pub enum EvalCommand {
     /// Dynamic object removal against SemanticKITTI-style labels (PR, RR, F1,
     /// precision of removal; point-wise and voxel-wise at 0.2 m).
     Dor(DorArgs),
+    /// Change detection against simulated ground truth: permanent structure
+    /// kept, removed objects gone, appeared objects present, mover leftovers,
+    /// change events in the right session (0.2 m voxels, after the last session).
+    Changes(ChangesArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct ChangesArgs {
+    /// The store.
+    pub store: PathBuf,
+    /// The simulator's output folder the sessions were ingested from.
+    #[arg(long)]
+    pub gt: PathBuf,
+    /// How map voxels reach the truth's frame: `owner` moves each by its owner
+    /// keyframe's true pose (scores change detection alone), `rigid` by one
+    /// Umeyama fit of all keyframes (alignment errors included).
+    #[arg(long, default_value = "owner", value_parser = ["owner", "rigid"])]
+    pub placement: String,
 }
 
 #[derive(Debug, Args)]
@@ -73,6 +97,20 @@ pub fn run(ctx: &Ctx, cmd: EvalCommand) -> anyhow::Result<()> {
                     }
                     print!("{}", render_table(&report.scores));
                 }
+            }
+            Ok(())
+        }
+        EvalCommand::Changes(a) => {
+            let store = Store::open_read_only(&a.store)?;
+            let cfg = ChangeEvalConfig {
+                static_threshold: ctx.config.change.static_threshold,
+                placement: if a.placement == "rigid" { Placement::Rigid } else { Placement::Owner },
+                ..ChangeEvalConfig::default()
+            };
+            let report = changes_report(&store, &a.gt, &cfg)?;
+            match ctx.format {
+                Format::Json => print_json(&report)?,
+                _ => print_changes(&report),
             }
             Ok(())
         }
@@ -143,4 +181,161 @@ fn print_align(r: &AlignReport) {
         &["step", "residual rigid", "residual session", "residual submap", "ate fixed", "ate session", "ate submap"],
         &rows,
     );
+}
+
+fn percent(v: Option<f64>) -> String {
+    v.map_or("-".into(), |v| format!("{:.2} %", v * 100.0))
+}
+
+fn count(f: &Fraction) -> String {
+    format!("{} / {}", thousands(f.hits), thousands(f.total))
+}
+
+fn print_changes(r: &ChangesReport) {
+    let s = &r.scores;
+    println!(
+        "lifelong map after session {} (graph version {}): {} voxels of {} m, {} static (eps_g < {})",
+        r.last_session,
+        r.graph_version,
+        thousands(s.lifelong_voxels),
+        r.voxel_m,
+        thousands(s.static_voxels),
+        r.settings.static_threshold
+    );
+    let a = &r.alignment;
+    println!(
+        "rigid fit to the truth on {} keyframes: RMSE {:.0} mm, max {:.0} mm; voxels placed {} ({} voxels, {} events \
+         by the rigid fit)",
+        a.keyframes,
+        a.rmse_m * 1000.0,
+        a.max_m * 1000.0,
+        match r.settings.placement {
+            Placement::Owner => "by their owner keyframes' true poses",
+            Placement::Rigid => "by the rigid fit",
+        },
+        thousands(r.voxels_placed_rigidly as u64),
+        thousands(r.events_placed_rigidly as u64)
+    );
+    println!();
+    let rows: Vec<Vec<String>> = r
+        .sessions
+        .iter()
+        .map(|x| {
+            let c = &x.counts;
+            vec![
+                x.session_id.to_string(),
+                x.name.clone(),
+                x.sim_session.to_string(),
+                c.coexist.to_string(),
+                c.deleted_overlap.to_string(),
+                c.deleted_non_overlap.to_string(),
+                c.emerged_overlap.to_string(),
+                c.emerged_non_overlap.to_string(),
+                c.events.to_string(),
+                c.merged_on_move.to_string(),
+                c.lifelong_voxels.to_string(),
+                c.static_voxels.to_string(),
+            ]
+        })
+        .collect();
+    print_table(
+        &[
+            "session",
+            "name",
+            "sim",
+            "coexist",
+            "deleted_overlap",
+            "deleted_non_overlap",
+            "emerged_overlap",
+            "emerged_non_overlap",
+            "events",
+            "merged_on_move",
+            "lifelong",
+            "static",
+        ],
+        &rows,
+    );
+    println!();
+    let counts = [
+        count(&s.permanent_static),
+        count(&s.removed_static),
+        count(&s.appeared_present),
+        count(&s.mover_static_of_static_map),
+        count(&s.events_correct),
+    ];
+    let mut rows: Vec<Vec<String>> = r
+        .goals
+        .iter()
+        .zip(counts)
+        .enumerate()
+        .map(|(i, (g, c))| {
+            let rel = if g.relation == ">=" { "≥" } else { "≤" };
+            vec![
+                format!("{} {}", i + 1, g.metric),
+                percent(g.value),
+                c,
+                format!("{rel} {:.0} %", g.goal * 100.0),
+                g.met.map_or("-", |m| if m { "yes" } else { "NO" }).into(),
+            ]
+        })
+        .collect();
+    let extra = |metric: &str, f: &Fraction| vec![format!("  {metric}"), percent(f.value), count(f), String::new()];
+    rows.insert(1, extra("on permanent objects", &s.permanent_static_objects));
+    rows.insert(2, extra("ground and the rest", &s.permanent_static_ground));
+    rows.insert(4, extra("of the voxels some session saw free", &s.removed_static_seen_free));
+    rows.insert(6, extra("appeared objects' voxels static", &s.appeared_static_voxels));
+    rows.insert(8, extra("mover voxels static (of mover voxels)", &s.mover_voxels_static));
+    rows.push(extra("removed objects", &s.events_removed_correct));
+    rows.push(extra("appeared objects", &s.events_appeared_correct));
+    print_table(&["metric", "value", "count", "goal", "met"], &rows);
+    let cats = |c: &[crate::eval::changes::CategoryCount]| {
+        c.iter()
+            .map(|c| format!("{} {} ({} static)", c.category, thousands(c.voxels), thousands(c.static_voxels)))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    println!("permanent voxels by category: {}", cats(&s.permanent_by_category));
+    println!("removed-object voxels by category: {}", cats(&s.removed_by_category));
+    let classes: Vec<String> = s
+        .permanent_by_class
+        .iter()
+        .take(8)
+        .map(|c| format!("{} {} ({} static)", c.class, thousands(c.voxels), thousands(c.static_voxels)))
+        .collect();
+    println!("permanent voxels by class (largest): {}", classes.join(", "));
+    let unseen = s.appeared.iter().filter(|a| !a.seen).count();
+    println!(
+        "{} removed, {} appeared objects ({unseen} not seen in the map); {} object changes unscored (fewer than {} \
+         voxels in the map)",
+        s.removed_objects,
+        s.appeared.len(),
+        s.events_unscored,
+        r.settings.min_voxels
+    );
+    let wrong: Vec<Vec<String>> = s
+        .changes
+        .iter()
+        .filter(|c| c.scored && !c.correct)
+        .map(|c| {
+            let events: Vec<String> =
+                c.events.iter().map(|e| format!("s{}:{}={}", e.session, e.category, e.count)).collect();
+            vec![
+                c.session.to_string(),
+                c.object.to_string(),
+                c.class.clone(),
+                c.change.into(),
+                c.voxels.to_string(),
+                c.nearest_keyframe_m.map_or("-".into(), |m| format!("{m:.1}")),
+                if events.is_empty() { "none".into() } else { events.join(" ") },
+            ]
+        })
+        .collect();
+    if !wrong.is_empty() {
+        println!();
+        println!("object changes without the right events in their session:");
+        print_table(
+            &["session", "object", "class", "change", "voxels", "nearest_kf_m", "events in its region"],
+            &wrong,
+        );
+    }
 }

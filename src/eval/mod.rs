@@ -8,6 +8,7 @@
 //!   (PR, RR, F1, precision of removal; point-wise and voxel-wise).
 
 pub mod align;
+pub mod changes;
 pub mod dor;
 mod dor_store;
 pub use dor_store::{DorReport, dor_report};
