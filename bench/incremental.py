@@ -53,51 +53,13 @@ import tempfile
 import time
 from pathlib import Path
 
+from benchcommon import BUSY_FLAG, OtherLoad, SeamError, log
+
 ROOT = Path(__file__).resolve().parents[1]
 MERGE = ("coarse_align", "loops", "optimize")
 UPDATE = ("evidence", "changes")
 FULL_KEYFRAMES = 300
-BUSY_FLAG = 0.3  # other processes busier than this many cores during a timed command: flagged
 TIME_V = "/usr/bin/time"
-
-
-def log(msg):
-    print(msg, file=sys.stderr, flush=True)
-
-
-class SeamError(RuntimeError):
-    pass
-
-
-# ---------------------------------------------------------------- other processes' CPU
-
-
-def _system_busy_s():
-    """CPU seconds all processes have used since boot (Linux /proc/stat), or None."""
-    try:
-        f = Path("/proc/stat").read_text().split("\n", 1)[0].split()[1:]
-        user, nice, system, _idle, _iowait, irq, softirq, steal = (int(v) for v in f[:8])
-        return (user + nice + system + irq + softirq + steal) / os.sysconf("SC_CLK_TCK")
-    except (OSError, ValueError):
-        return None
-
-
-def _own_cpu_s():
-    t = os.times()  # this process and its waited-for children (the seam subprocesses)
-    return t.user + t.system + t.children_user + t.children_system
-
-
-class OtherLoad:
-    """Cores other processes kept busy on average between start and stop."""
-
-    def __init__(self):
-        self.sys0, self.own0, self.t0 = _system_busy_s(), _own_cpu_s(), time.perf_counter()
-
-    def cores(self):
-        sys1, own1, t1 = _system_busy_s(), _own_cpu_s(), time.perf_counter()
-        if self.sys0 is None or sys1 is None or t1 <= self.t0:
-            return None
-        return max(0.0, ((sys1 - self.sys0) - (own1 - self.own0)) / (t1 - self.t0))
 
 
 # ---------------------------------------------------------------- seam

@@ -694,11 +694,9 @@ mod tests {
         assert!(keys([0.0, 0.0, 0.0, 0.2, 0.2, 0.2], turn).len() == 1);
     }
 
-    /// A session moved rigidly by a sub-voxel shift and a small turn:
-    /// reprojection agrees with recomputation on ≥ 95 % of the occupied
-    /// voxels, which moving voxel centres alone does not reach.
-    #[test]
-    fn reprojection_matches_recomputation_for_sub_voxel_motion() {
+    /// Two walls 10 m apart seen by 6 keyframes driving between them, in
+    /// two submaps.
+    fn corridor() -> (Vec<[f32; 3]>, Vec<Pose>) {
         let mut pts: Vec<[f32; 3]> = Vec::new();
         for i in 0..300 {
             for h in 0..12 {
@@ -707,16 +705,29 @@ mod tests {
                 pts.push([x, -4.97, z]);
             }
         }
-        let poses: Vec<Pose> = (0..6)
+        let poses = (0..6)
             .map(|f| {
                 Pose::from_parts(Translation3::new(f as f64 * 0.7 + 0.013, 0.021, 1.017), UnitQuaternion::identity())
             })
             .collect();
-        let inputs: Vec<KeyframeInput<'_>> = poses
+        (pts, poses)
+    }
+
+    fn corridor_inputs<'a>(pts: &'a [[f32; 3]], poses: &[Pose]) -> Vec<KeyframeInput<'a>> {
+        poses
             .iter()
             .enumerate()
-            .map(|(i, t)| KeyframeInput { index: i as u32, submap: i / 3, t_world_keyframe: *t, points: &pts })
-            .collect();
+            .map(|(i, t)| KeyframeInput { index: i as u32, submap: i / 3, t_world_keyframe: *t, points: pts })
+            .collect()
+    }
+
+    /// A session moved rigidly by a sub-voxel shift and a small turn:
+    /// reprojection agrees with recomputation on ≥ 95 % of the occupied
+    /// voxels, which moving voxel centres alone does not reach.
+    #[test]
+    fn reprojection_matches_recomputation_for_sub_voxel_motion() {
+        let (pts, poses) = corridor();
+        let inputs = corridor_inputs(&pts, &poses);
         let motion = Pose::from_parts(
             Translation3::new(0.13, -0.07, 0.05),
             UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 1.5f64.to_radians()),
@@ -735,24 +746,8 @@ mod tests {
     /// right way is `reproject_identity_and_translation`'s job.)
     #[test]
     fn reprojection_matches_recomputation_for_whole_voxel_shifts() {
-        let mut pts: Vec<[f32; 3]> = Vec::new();
-        for i in 0..300 {
-            for h in 0..12 {
-                let (x, z) = (i as f32 * 0.07 - 10.0, h as f32 * 0.15 - 0.9);
-                pts.push([x, 5.03, z]);
-                pts.push([x, -4.97, z]);
-            }
-        }
-        let poses: Vec<Pose> = (0..6)
-            .map(|f| {
-                Pose::from_parts(Translation3::new(f as f64 * 0.7 + 0.013, 0.021, 1.017), UnitQuaternion::identity())
-            })
-            .collect();
-        let inputs: Vec<KeyframeInput<'_>> = poses
-            .iter()
-            .enumerate()
-            .map(|(i, t)| KeyframeInput { index: i as u32, submap: i / 3, t_world_keyframe: *t, points: &pts })
-            .collect();
+        let (pts, poses) = corridor();
+        let inputs = corridor_inputs(&pts, &poses);
         let shift = Pose::from_parts(Translation3::new(0.4, -0.2, 0.0), UnitQuaternion::identity());
         let now: Vec<Pose> = poses.iter().map(|p| shift * p).collect();
         let c = check_reprojection(&inputs, &now, &EvidenceConfig::default());
