@@ -54,22 +54,39 @@ pub struct ChangeConfig {
 }
 
 /// The reliability `w` of the new session's free evidence at a deleted
-/// voxel, which enters ε_g as `B(ε_g, ½ + ½w)` ([`deleted_factor`]).
+/// voxel, which enters ε_g as `B(ε_g, ½ + ½w)` ([`deleted_factor`]); `s` is
+/// the free support `min(n_free, n_sat) / n_sat`.
 ///
 /// Measured on a simulated 5-session OS1-64 site (80 keyframes each, `seam
-/// eval changes`): `omega` keeps 99.3 % of permanent structure static and
-/// leaves 66 % of removed objects' voxels static; `omega_or_support` 97.8 %
-/// and 42 %. Free evidence from one direction only (ω ≈ 0) is common at
-/// deleted voxels: 72 % of them there.
+/// eval changes`; permanent structure kept static / removed objects' voxels
+/// left static): `omega` 99.34 % / 65.7 %, `omega_or_half_support` 99.04 % /
+/// 57.3 %, `omega_or_support` 97.81 % / 41.8 %. Free evidence from one
+/// direction only (ω ≈ 0) is common at deleted voxels: 72 % of them there.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum DeletedReliability {
     /// `w = ω_free` (MATH.md §8, ω for ELite's γ).
     #[default]
     Omega,
-    /// `w = max(ω_free, min(n_free, n_sat) / n_sat)`: enough keyframes saw
-    /// the space empty, from whatever direction. Removes more; eats more.
+    /// `w = max(ω_free, s / 2)`: at most `B(ε_g, ¾)` per session from
+    /// support alone, so one session seeing the space empty from one
+    /// direction cannot take a voxel out of the static map (0.1 → 0.25),
+    /// two such sessions can (→ 0.5).
+    OmegaOrHalfSupport,
+    /// `w = max(ω_free, s)`: enough keyframes saw the space empty, from
+    /// whatever direction. Removes the most; eats the most.
     OmegaOrSupport,
+}
+
+impl DeletedReliability {
+    /// `w` from the free evidence's ω and support `s`.
+    pub fn of(self, omega_free: f64, support: f64) -> f64 {
+        match self {
+            DeletedReliability::Omega => omega_free,
+            DeletedReliability::OmegaOrHalfSupport => omega_free.max(support / 2.0),
+            DeletedReliability::OmegaOrSupport => omega_free.max(support),
+        }
+    }
 }
 
 impl Default for ChangeConfig {
@@ -403,6 +420,13 @@ mod tests {
         assert_eq!(c.deleted_reliability, DeletedReliability::OmegaOrSupport);
         assert_eq!(c.tau_c_m, 0.4);
         assert!(toml::from_str::<ChangeConfig>("deleted_reliability = \"support\"").is_err());
+        let half: ChangeConfig = toml::from_str("deleted_reliability = \"omega_or_half_support\"").unwrap();
+        assert_eq!(half.deleted_reliability.of(0.1, 1.0), 0.5);
+        assert_eq!(DeletedReliability::Omega.of(0.1, 1.0), 0.1);
+        assert_eq!(DeletedReliability::OmegaOrSupport.of(0.1, 0.6), 0.6);
+        // Half support: one session cannot leave the static map, two can.
+        let once = bayes(0.1, deleted_factor(0.5));
+        assert!(once < 0.5 && bayes(once, deleted_factor(0.5)) >= 0.5 - 1e-12);
         // Unreliable free evidence leaves ε_g alone; reliable evidence removes.
         assert!((bayes(0.3, deleted_factor(0.0)) - 0.3).abs() < 1e-12);
         assert!(bayes(0.1, deleted_factor(1.0)) > 0.99);

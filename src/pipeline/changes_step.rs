@@ -8,7 +8,7 @@
 
 use super::IngestError;
 use super::steps::StepCtx;
-use crate::change::{DeletedReliability, LifelongMap, detect};
+use crate::change::{LifelongMap, detect};
 use crate::evidence::SubmapEvidence;
 use crate::evidence::session::{delta, reproject};
 use crate::geometry::Pose;
@@ -83,12 +83,11 @@ pub(super) fn changes(ctx: &mut StepCtx<'_>, step: &'static str, seq: i64) -> Re
         (0..m.len()).map(move |i| (m.xyz_m[i].map(|c| c as f64), m.eps_l[i], m.points[i], m.owner_keyframe[i]))
     });
     let new = detect::new_voxels(rows, v, |k| evidence.get(k).map_or(0.0, |r| r.evidence().hit.omega(ecfg) as f32));
-    let by_support = ctx.config.change.deleted_reliability == DeletedReliability::OmegaOrSupport;
+    let reliability = ctx.config.change.deleted_reliability;
     let free_at = |k: u64| {
         evidence.get(k).map(|r| {
-            let omega = r.evidence().free.omega(ecfg);
             let support = r.free_n.min(ecfg.n_sat) as f64 / ecfg.n_sat.max(1) as f64;
-            (r.free_n, if by_support { omega.max(support) } else { omega } as f32)
+            (r.free_n, reliability.of(r.evidence().free.omega(ecfg), support) as f32)
         })
     };
     let next_id = map.max_id() + 1;
