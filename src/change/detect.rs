@@ -211,19 +211,16 @@ impl KeySet<'_> {
         if let Some(i) = pack(key).and_then(|k| self.find(k)) {
             return Some(i);
         }
+        // Neighbours come in key order, so the first at the least distance
+        // is the lowest key among the nearest.
         let mut best: Option<(i32, usize)> = None;
-        for dx in -r..=r {
-            for dy in -r..=r {
-                for dz in -r..=r {
-                    let d2 = dx * dx + dy * dy + dz * dz;
-                    if d2 == 0 || best.is_some_and(|(b, _)| b <= d2) {
-                        continue;
-                    }
-                    let k = VoxelKey([key.0[0] + dx, key.0[1] + dy, key.0[2] + dz]);
-                    if let Some(i) = pack(k).and_then(|k| self.find(k)) {
-                        best = Some((d2, i));
-                    }
-                }
+        for (d, n) in key.neighbours(r) {
+            let d2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+            if best.is_some_and(|(b, _)| b <= d2) {
+                continue;
+            }
+            if let Some(i) = pack(n).and_then(|k| self.find(k)) {
+                best = Some((d2, i));
             }
         }
         best.map(|(_, i)| i)

@@ -203,24 +203,10 @@ pub fn dynamic_voxels(session: &InterestEvidence, eps: &[f32], cfg: &EvidenceCon
             if !cfg.static_neighbour_veto {
                 return true;
             }
-            let k = unpack(keys[i]).0;
-            for dz in -1..=1 {
-                for dy in -1..=1 {
-                    for dx in -1..=1 {
-                        if (dx, dy, dz) == (0, 0, 0) {
-                            continue;
-                        }
-                        let n = pack(VoxelKey([k[0] + dx, k[1] + dy, k[2] + dz])).and_then(|n| session.find(n));
-                        if let Some(j) = n
-                            && rows[j].hit_n > 0
-                            && eps[j] as f64 <= tau
-                        {
-                            return false;
-                        }
-                    }
-                }
-            }
-            true
+            // Vetoed when a static occupied voxel is among its 26 neighbours.
+            !unpack(keys[i]).neighbours(1).any(|(_, n)| {
+                pack(n).and_then(|n| session.find(n)).is_some_and(|j| rows[j].hit_n > 0 && eps[j] as f64 <= tau)
+            })
         })
         .collect()
 }
@@ -507,16 +493,9 @@ pub fn check_reprojection(inputs: &[KeyframeInput<'_>], poses_now: &[Pose], cfg:
             out.same_voxel += 1;
             out.same_voxel_and_verdict += (dynamic(moved_eps[j]) == verdict) as usize;
         }
-        let c = unpack(k).0;
-        let found = (-1..=1).any(|dz| {
-            (-1..=1).any(|dy| {
-                (-1..=1).any(|dx| {
-                    pack(VoxelKey([c[0] + dx, c[1] + dy, c[2] + dz]))
-                        .and_then(|n| occupied(&moved, n))
-                        .is_some_and(|j| dynamic(moved_eps[j]) == verdict)
-                })
-            })
-        });
+        let same = |j: usize| dynamic(moved_eps[j]) == verdict;
+        let found = occupied(&moved, k).is_some_and(same)
+            || unpack(k).neighbours(1).any(|(_, n)| pack(n).and_then(|n| occupied(&moved, n)).is_some_and(same));
         near += found as usize;
     }
     let total = out.occupied_recomputed.max(1) as f64;
@@ -692,6 +671,27 @@ mod tests {
             UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 0.9),
         );
         assert!(keys([0.0, 0.0, 0.0, 0.2, 0.2, 0.2], turn).len() == 1);
+    }
+
+    /// The veto keeps a dynamic voxel with a static occupied neighbour; a
+    /// static neighbour that was only freed does not veto.
+    #[test]
+    fn static_neighbour_veto_needs_an_occupied_static_neighbour() {
+        let hit = Row { hit_n: 1, ..Row::default() };
+        let key = |k: [i32; 3]| pack(VoxelKey(k)).unwrap();
+        let cells = [
+            ([0, 0, 0], hit, 0.9f32),
+            ([1, 0, 1], hit, 0.1),
+            ([5, 5, 5], hit, 0.9),
+            ([6, 5, 5], Row::default(), 0.1),
+            ([10, 0, 0], hit, 0.9),
+        ];
+        let parts = vec![cells.iter().map(|(k, r, _)| (key(*k), *r)).collect::<Vec<_>>()];
+        let ev = InterestEvidence::from_parts(&parts, 0.2);
+        let eps: Vec<f32> = cells.iter().map(|c| c.2).collect();
+        let veto = EvidenceConfig { static_neighbour_veto: true, ..EvidenceConfig::default() };
+        assert_eq!(dynamic_voxels(&ev, &eps, &veto), vec![false, false, true, false, true]);
+        assert_eq!(dynamic_voxels(&ev, &eps, &EvidenceConfig::default()), vec![true, false, true, false, true]);
     }
 
     /// Two walls 10 m apart seen by 6 keyframes driving between them, in

@@ -21,12 +21,37 @@ impl VoxelKey {
             (self.0[2] as f64 + 0.5) * voxel_size_m,
         )
     }
+
+    /// The keys within `r` voxels of this one on every axis (the 26-neighbourhood
+    /// for `r = 1`), itself excluded, with their offsets, in key order (x,
+    /// then y, then z).
+    pub fn neighbours(self, r: i32) -> impl Iterator<Item = ([i32; 3], VoxelKey)> {
+        let k = self.0;
+        (-r..=r).flat_map(move |dx| {
+            (-r..=r).flat_map(move |dy| {
+                (-r..=r)
+                    .filter(move |&dz| (dx, dy, dz) != (0, 0, 0))
+                    .map(move |dz| ([dx, dy, dz], VoxelKey([k[0] + dx, k[1] + dy, k[2] + dz])))
+            })
+        })
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use proptest::prelude::*;
+
+    #[test]
+    fn neighbours_exclude_the_key_and_come_in_key_order() {
+        let n: Vec<VoxelKey> = VoxelKey([5, 0, -2]).neighbours(1).map(|(_, k)| k).collect();
+        assert_eq!(n.len(), 26);
+        assert!(!n.contains(&VoxelKey([5, 0, -2])));
+        assert!(n.windows(2).all(|w| w[0] < w[1]));
+        assert_eq!(n[0], VoxelKey([4, -1, -3]));
+        assert_eq!(VoxelKey([0, 0, 0]).neighbours(2).count(), 124);
+        assert_eq!(VoxelKey([0, 0, 0]).neighbours(0).count(), 0);
+    }
 
     proptest! {
         #[test]
