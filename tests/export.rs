@@ -44,18 +44,7 @@ fn setup(tmp: &Path) -> (std::path::PathBuf, Vec<PointLabels>, Store) {
         .transaction(|tx| -> Result<(), StoreError> {
             for i in 0..3 {
                 let name = format!("s{}", i + 1);
-                let ns = NewSession {
-                    name: &name,
-                    content_hash: &name,
-                    source_dir: "/nowhere",
-                    layout: "kitti",
-                    date: None,
-                    sensor_model: None,
-                    fov_json: None,
-                    keyframe_count: 3,
-                    point_count: 1000,
-                };
-                let sid = insert_session(tx, &ns)?;
+                let sid = fake_session(tx, &name, 3)?;
                 if let Some(rec) = recs.get(i) {
                     insert_file(tx, &root, rec, Some(sid.0))?;
                 }
@@ -71,6 +60,24 @@ fn names(dir: &Path) -> Vec<String> {
         std::fs::read_dir(dir).unwrap().flatten().map(|e| e.file_name().to_string_lossy().into_owned()).collect();
     v.sort();
     v
+}
+
+/// A session row with no folder behind it, named and hashed `name`.
+fn fake_session(tx: &rusqlite::Transaction<'_>, name: &str, keyframes: i64) -> Result<SessionId, StoreError> {
+    insert_session(
+        tx,
+        &NewSession {
+            name,
+            content_hash: name,
+            source_dir: "/nowhere",
+            layout: "kitti",
+            date: None,
+            sensor_model: None,
+            fov_json: None,
+            keyframe_count: keyframes,
+            point_count: 1000,
+        },
+    )
 }
 
 #[test]
@@ -232,18 +239,7 @@ fn setup_lifelong(tmp: &Path) -> (std::path::PathBuf, Store) {
             let mut last_version = 0;
             for i in 1..=3 {
                 let name = format!("s{i}");
-                let ns = NewSession {
-                    name: &name,
-                    content_hash: &name,
-                    source_dir: "/nowhere",
-                    layout: "kitti",
-                    date: None,
-                    sensor_model: None,
-                    fov_json: None,
-                    keyframe_count: 12,
-                    point_count: 1000,
-                };
-                let sid = insert_session(tx, &ns)?;
+                let sid = fake_session(tx, &name, 12)?;
                 last_version = insert_graph_version(tx, sid, "session", "{}", None, &[], &[])?;
                 let events: Vec<ChangeEvent> =
                     (0..if i == 1 { 0 } else { EVENTS[i as usize - 2] }).map(|k| change_event(i, k)).collect();
