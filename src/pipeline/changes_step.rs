@@ -22,9 +22,12 @@ use std::time::Instant;
 
 /// The lifelong map as stored, moved to `version` (each voxel by its owner
 /// keyframe's ΔT between the map's version and `version`), and how many
-/// voxels merged on the way. Empty before the first session's `changes`.
-pub(super) fn placed_map(conn: &Connection, version: i64) -> Result<(LifelongMap, usize), IngestError> {
-    let Some(state) = store::map_state(conn)? else { return Ok((LifelongMap::default(), 0)) };
+/// voxels merged on the way. Before the first session's `changes` it is an
+/// empty map of `voxel_m` voxels.
+pub(super) fn placed_map(conn: &Connection, version: i64, voxel_m: f64) -> Result<(LifelongMap, usize), IngestError> {
+    let Some(state) = store::map_state(conn)? else {
+        return Ok((LifelongMap { voxel_m, voxels: Vec::new() }, 0));
+    };
     let map = store::read_lifelong_map(conn)?;
     if state.graph_version == version {
         return Ok((map, 0));
@@ -58,7 +61,7 @@ pub(super) fn changes(ctx: &mut StepCtx<'_>, step: &'static str, seq: i64) -> Re
     let v = ecfg.voxel_size_m;
 
     let t_move = Instant::now();
-    let (map, merged_on_move) = placed_map(conn, version)?;
+    let (map, merged_on_move) = placed_map(conn, version, v)?;
     let move_s = t_move.elapsed().as_secs_f64();
 
     // The new session's cleaned maps and evidence, on this version's grid.
@@ -91,8 +94,7 @@ pub(super) fn changes(ctx: &mut StepCtx<'_>, step: &'static str, seq: i64) -> Re
         })
     };
     let next_id = map.max_id() + 1;
-    let map_in = if map.voxel_m > 0.0 { map } else { LifelongMap { voxel_m: v, voxels: Vec::new() } };
-    let (map, events, mut stats) = detect::update_map(map_in, &new, &free_at, session.0, next_id, &ctx.config.change);
+    let (map, events, mut stats) = detect::update_map(map, &new, &free_at, session.0, next_id, &ctx.config.change);
     stats.merged_on_move = merged_on_move;
     let update_s = t_update.elapsed().as_secs_f64();
 

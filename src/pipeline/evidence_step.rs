@@ -64,7 +64,7 @@ pub(super) fn evidence(ctx: &mut StepCtx<'_>, step: &'static str, seq: i64) -> R
         .collect();
     // The lifelong map's voxels, moved to this version, are kept as interest
     // too: change detection asks whether this session saw them free.
-    let (map, _) = super::changes_step::placed_map(ctx.store.conn(), version)?;
+    let (map, _) = super::changes_step::placed_map(ctx.store.conn(), version, cfg.voxel_size_m)?;
     let map_keys = map.packed_keys();
     drop(map);
     ctx.progress.begin("ray cast", inputs.len() as u64);
