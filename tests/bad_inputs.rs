@@ -269,7 +269,16 @@ fn bad_evidence_settings_and_dor_inputs() {
     std::fs::write(&model, "[evidence]\nmodel = \"octomap\"\n").unwrap();
     let clearance = t.path().join("clearance.toml");
     std::fs::write(&clearance, "[evidence]\nfree_clearance_m = -1.0\n").unwrap();
-    for (cfg, fragment) in [(&model, "octomap"), (&clearance, "free_clearance_m")] {
+    let clamp = t.path().join("clamp.toml");
+    std::fs::write(&clamp, "[change]\neps_g_min = 0.9\neps_g_max = 0.1\n").unwrap();
+    let reliability = t.path().join("reliability.toml");
+    std::fs::write(&reliability, "[change]\ndeleted_reliability = \"support\"\n").unwrap();
+    for (cfg, fragment) in [
+        (&model, "octomap"),
+        (&clearance, "free_clearance_m"),
+        (&clamp, "eps_g_min"),
+        (&reliability, "omega_or_half_support"),
+    ] {
         let o = run(&["--config", cfg.to_str().unwrap(), "ingest", st, dir]);
         assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
         assert!(stderr(&o).contains(fragment), "message lacks {fragment:?}:\n{}", stderr(&o));
