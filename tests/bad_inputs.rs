@@ -335,3 +335,30 @@ fn bad_change_eval_inputs() {
     }
     assert_same_state(&before, &store_state(&store), "after eval changes with bad inputs");
 }
+
+/// A reader that closes the pipe early (`seam sessions … | head -0`) ends seam
+/// quietly, never with a "failed printing to stdout" panic (exit 101).
+#[cfg(unix)]
+#[test]
+fn closed_stdout_is_not_a_panic() {
+    use std::os::unix::process::ExitStatusExt;
+    let tmp = tempfile::tempdir().unwrap();
+    let store = tmp.path().join("site.seam");
+    init_store(&store);
+    let mut child = seam()
+        .args(["sessions", store.to_str().unwrap(), "--format", "json"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Close the read end before seam writes anything: its first write meets EPIPE.
+    drop(child.stdout.take());
+    let o = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!err.contains("panicked"), "seam panicked on a closed stdout:\n{err}");
+    assert!(
+        o.status.success() || o.status.signal() == Some(13), // SIGPIPE on Linux and macOS
+        "expected a quiet end (exit 0 or SIGPIPE), got {:?}: {err}",
+        o.status
+    );
+}
