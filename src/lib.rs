@@ -57,3 +57,4 @@ pub mod registration;
 pub mod sensor;
 pub mod sim;
 pub mod store;
+pub mod text;

@@ -21,6 +21,7 @@
 
 pub mod detect;
 pub mod lifelong;
+pub mod places;
 
 pub use detect::{ChangeConfig, DeletedReliability, SessionChanges, update_map};
 pub use lifelong::{Category, ChangeEvent, LifelongMap, MapVoxel};

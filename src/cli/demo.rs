@@ -3,6 +3,7 @@
 use super::output::{json, log, print_json, print_table, thousands};
 use super::simulate::{SiteArgs, simulate_site};
 use super::{Ctx, UsageError};
+use crate::change::places::{SUMMARY_MIN_EVENTS, SessionSummary};
 use crate::store::{self, InitOptions, Store};
 use clap::Args;
 use std::path::PathBuf;
@@ -68,10 +69,18 @@ pub fn run(ctx: &Ctx, a: DemoArgs) -> anyhow::Result<()> {
     }
     let store = Store::open_read_only(&store_path)?;
     let sessions = store::sessions(store.conn())?;
+    let voxel_m = store::map_state(store.conn())?.map_or(ctx.config.evidence.voxel_size_m, |m| m.voxel_m);
+    // Session 1 starts the map; every later one is compared with it.
+    let summaries = sessions
+        .iter()
+        .skip(1)
+        .map(|s| SessionSummary::from_store(store.conn(), s.session_id, &s.name, voxel_m))
+        .collect::<Result<Vec<_>, _>>()?;
     if json(ctx) {
-        return print_json(
-            &serde_json::json!({ "store": store_path, "sessions": sessions, "receipts": receipts, "wall_s": t0.elapsed().as_secs_f64() }),
-        );
+        return print_json(&serde_json::json!({
+            "store": store_path, "sessions": sessions, "receipts": receipts, "changes": summaries,
+            "wall_s": t0.elapsed().as_secs_f64(),
+        }));
     }
     // How close the aligned poses are to the simulator's truth.
     let eval = crate::eval::align_report(&store, &a.out.join("sessions"), false, &ctx.config.graph)?;
@@ -98,8 +107,12 @@ pub fn run(ctx: &Ctx, a: DemoArgs) -> anyhow::Result<()> {
         &["session", "name", "date", "keyframes", "points", "path_m", "odometry_drift_m", "alignment", "ate_m"],
         &rows,
     );
+    println!("\nwhat changed, session by session (places: groups of ≥ {SUMMARY_MIN_EVENTS} changed voxels):");
+    for summary in &summaries {
+        println!("  {}", summary.sentence());
+    }
     println!(
-        "store: {}  (try `seam info {0}`, `seam poses {0}`, `seam eval align {0} --gt {}`)",
+        "\nstore: {}  (try `seam info {0}`, `seam poses {0}`, `seam eval align {0} --gt {}`)",
         store_path.display(),
         a.out.join("sessions").display()
     );

@@ -339,3 +339,27 @@ pub fn session_changes(conn: &Connection) -> Result<Vec<(SessionId, SessionChang
         .map_err(e(conn))?;
     rows.collect::<Result<_, _>>().map_err(e(conn))
 }
+
+/// Positions (world frame of the session's own graph version) of session
+/// `session`'s change events in `categories`, by event id.
+pub fn session_event_positions(
+    conn: &Connection,
+    session: SessionId,
+    categories: &[Category],
+) -> Result<Vec<[f64; 3]>, StoreError> {
+    let mut st = conn
+        .prepare_cached(
+            "SELECT x_m, y_m, z_m FROM change_events WHERE session_id = ?1 AND category = ?2 ORDER BY event_id",
+        )
+        .map_err(e(conn))?;
+    let mut out = Vec::new();
+    for c in categories {
+        let rows = st
+            .query_map(params![session.0, c.as_str()], |r| Ok([r.get::<_, f64>(0)?, r.get(1)?, r.get(2)?]))
+            .map_err(e(conn))?;
+        for r in rows {
+            out.push(r.map_err(e(conn))?);
+        }
+    }
+    Ok(out)
+}
