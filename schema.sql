@@ -265,3 +265,22 @@ CREATE TABLE session_changes (
     lifelong_voxels       INTEGER NOT NULL,
     static_voxels         INTEGER NOT NULL
 );
+
+-- @migration 5
+-- Named zones for queries (`seam zones add`, `zone:"Tower B"` in a query),
+-- world frame (`seam poses`). A `bbox` zone is its box; a `polygon` zone is
+-- a polygon in the xy plane (`polygon_wkt`, `POLYGON((x y, ...))`, holes
+-- allowed) between min_z_m and max_z_m, and its min/max are the polygon's
+-- bounding box: a query asks the tile R*Tree with them, then tests the
+-- polygon.
+CREATE TABLE zones (
+    zone_id      INTEGER PRIMARY KEY,
+    name         TEXT NOT NULL UNIQUE,
+    kind         TEXT NOT NULL CHECK (kind IN ('bbox', 'polygon')),
+    min_x_m REAL NOT NULL, min_y_m REAL NOT NULL, min_z_m REAL NOT NULL,
+    max_x_m REAL NOT NULL, max_y_m REAL NOT NULL, max_z_m REAL NOT NULL,
+    polygon_wkt  TEXT,                       -- kind = 'polygon' only
+    created_at   TEXT NOT NULL,
+    CHECK (min_x_m <= max_x_m AND min_y_m <= max_y_m AND min_z_m <= max_z_m),
+    CHECK ((kind = 'polygon') = (polygon_wkt IS NOT NULL))
+);
