@@ -265,3 +265,32 @@ CREATE TABLE session_changes (
     lifelong_voxels       INTEGER NOT NULL,
     static_voxels         INTEGER NOT NULL
 );
+
+-- @migration 5
+-- Named zones for queries (`seam zones add`, `zone:"Tower B"` in a query),
+-- world frame (`seam poses`). A `bbox` zone is its box; a `polygon` zone is
+-- a polygon in the xy plane (`polygon_wkt`, `POLYGON((x y, ...))`, holes
+-- allowed) between min_z_m and max_z_m, and its min/max are the polygon's
+-- bounding box: a query asks the tile R*Tree with them, then tests the
+-- polygon.
+CREATE TABLE zones (
+    zone_id      INTEGER PRIMARY KEY,
+    name         TEXT NOT NULL UNIQUE,
+    kind         TEXT NOT NULL CHECK (kind IN ('bbox', 'polygon')),
+    min_x_m REAL NOT NULL, min_y_m REAL NOT NULL, min_z_m REAL NOT NULL,
+    max_x_m REAL NOT NULL, max_y_m REAL NOT NULL, max_z_m REAL NOT NULL,
+    polygon_wkt  TEXT,                       -- kind = 'polygon' only
+    created_at   TEXT NOT NULL,
+    CHECK (min_x_m <= max_x_m AND min_y_m <= max_y_m AND min_z_m <= max_z_m),
+    CHECK ((kind = 'polygon') = (polygon_wkt IS NOT NULL))
+);
+
+-- Change events in a box, answered from this index alone (`seam query`): the
+-- tile and session they are found by, then every other column a query
+-- returns, so no row is read from the table (`examples/query_bench.rs`, 1M
+-- events: a 50 m box of 80k events 273 → 85 ms, a 20 m box 22 → 3 ms, a
+-- count of the whole site 885 → 49 ms; about 75 bytes per event). It
+-- replaces change_events_by_tile, its prefix.
+DROP INDEX change_events_by_tile;
+CREATE INDEX change_events_by_tile_cover
+    ON change_events(tile, session_id, x_m, y_m, z_m, category, eps_g_before, eps_g_after, voxel_id);

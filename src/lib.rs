@@ -22,6 +22,7 @@
 //! - [`evidence`]: voxel ray casting and directional hit/free evidence, ε_l.
 //! - [`eval`]: metrics against ground truth (Umeyama, ATE, rigid residual).
 //! - [`store`]: the only module that touches SQLite and Parquet.
+//! - [`query`]: the query language: lexer, parser, planner to parameterised SQL, execution.
 //! - [`sim`]: a simulated multi-session construction site with ground truth.
 //! - [`config`]: one `Config`, a sub-struct per stage.
 //! - [`cli`]: the `seam` command line.
@@ -53,6 +54,7 @@ pub mod geometry;
 pub mod graph;
 pub mod io;
 pub mod pipeline;
+pub mod query;
 pub mod registration;
 pub mod sensor;
 pub mod sim;

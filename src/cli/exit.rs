@@ -61,6 +61,11 @@ pub fn exit_kind(err: &anyhow::Error) -> ExitKind {
                 crate::eval::EvalError::Solve(_) => ExitKind::Internal,
             };
         }
+        if cause.downcast_ref::<crate::query::Report>().is_some()
+            || cause.downcast_ref::<crate::query::QueryError>().is_some()
+        {
+            return ExitKind::Query;
+        }
         if cause.downcast_ref::<super::UsageError>().is_some() {
             return ExitKind::Usage;
         }

@@ -17,9 +17,11 @@ mod ingest;
 mod init;
 mod output;
 mod poses;
+mod query;
 mod rebuild;
 mod sessions;
 mod simulate;
+mod zones;
 
 use clap::{Parser, Subcommand, ValueEnum};
 use std::path::PathBuf;
@@ -80,6 +82,11 @@ pub enum Command {
     Export(export::ExportArgs),
     /// Recompute a store from the raw scans into a new store (same sessions, order, names).
     Rebuild(rebuild::RebuildArgs),
+    /// Ask a store a question: `seam query site.seam 'changes in zone:"Tower B" since:s3'`.
+    Query(query::QueryArgs),
+    /// Named zones for queries: add, list, rm.
+    #[command(subcommand)]
+    Zones(zones::ZonesCommand),
 }
 
 /// Shared settings resolved once from the global flags.
@@ -131,5 +138,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Eval(c) => eval::run(&ctx, c),
         Command::Export(a) => export::run(&ctx, a),
         Command::Rebuild(a) => rebuild::run(&ctx, a),
+        Command::Query(a) => query::run(&ctx, a),
+        Command::Zones(c) => zones::run(&ctx, c),
     }
 }

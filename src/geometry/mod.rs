@@ -6,6 +6,7 @@
 //! as `f32` in the sensor frame, because that is what sensors deliver and what
 //! halves the memory of a multi-million point session.
 
+pub mod polygon;
 mod pose;
 pub mod se3;
 mod voxel;

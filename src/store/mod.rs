@@ -30,6 +30,7 @@ mod lifelong;
 pub mod map_export;
 mod rows;
 mod schema;
+mod zones;
 
 pub use alignment::*;
 pub use check::{CheckReport, FileProblem};
@@ -38,6 +39,7 @@ pub use files::{FileRecord, ScanWriter, file_paths, insert_file, read_scan_row_g
 pub use lifelong::*;
 pub use rows::*;
 pub use schema::{SCHEMA_SQL, SCHEMA_VERSION};
+pub use zones::{Zone, ZoneShape, insert_zone, remove_zone, zones};
 
 use rusqlite::{Connection, OpenFlags, Transaction};
 use std::fs::{File, OpenOptions};

@@ -8,7 +8,7 @@ use std::path::Path;
 pub const SCHEMA_SQL: &str = include_str!("../../schema.sql");
 
 /// The newest migration in `schema.sql`.
-pub const SCHEMA_VERSION: i64 = 4;
+pub const SCHEMA_VERSION: i64 = 5;
 
 /// The migrations of `schema.sql` as `(version, sql)`, in file order.
 pub fn migrations() -> Vec<(i64, &'static str)> {

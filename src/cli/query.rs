@@ -1,0 +1,107 @@
+//! `seam query site.seam 'QUERY' [--explain] [--out FILE.parquet] [--format table|json|csv]`
+//!
+//! Opens the store read-only (a query may run beside an ingest and never
+//! changes the store), compiles the query against it and prints the rows.
+//! A mistake in the query exits 3 with the query shown and `^^^` under the
+//! part that is wrong, plus what exists instead; colours only on a terminal
+//! and never with `NO_COLOR`. `QUERY` may be `@FILE` to read it from a file
+//! (such as `queries/*.seamql`).
+
+use super::output::{json, log, print_json, print_table};
+use super::{Ctx, Format, UsageError};
+use crate::query::{self, Catalog, QueryResult, Report};
+use crate::store::{Store, StoreError, evidence_files::write_batch};
+use clap::Args;
+use std::io::IsTerminal;
+use std::path::PathBuf;
+
+#[derive(Debug, Args)]
+pub struct QueryArgs {
+    /// The store (opened read-only).
+    pub store: PathBuf,
+    /// The query, e.g. 'changes in zone:"Tower B" since:s3', or @FILE to read it from a file.
+    pub query: String,
+    /// Print the plan, the SQL with its `?` placeholders, the parameters and SQLite's plan; run nothing.
+    #[arg(long)]
+    pub explain: bool,
+    /// Write the rows to this Parquet file instead of printing them.
+    #[arg(long, value_name = "FILE.parquet")]
+    pub out: Option<PathBuf>,
+}
+
+/// Colours on stderr: only on a terminal, and never with `NO_COLOR` set.
+pub fn stderr_color() -> bool {
+    std::io::stderr().is_terminal() && std::env::var_os("NO_COLOR").is_none_or(|v| v.is_empty())
+}
+
+pub fn run(ctx: &Ctx, a: QueryArgs) -> anyhow::Result<()> {
+    if matches!(ctx.format, Format::Kitti | Format::Tum) {
+        return Err(UsageError("seam query prints --format table, json or csv".into()).into());
+    }
+    let text = match a.query.strip_prefix('@') {
+        Some(path) => {
+            std::fs::read_to_string(path).map_err(|e| UsageError(format!("cannot read the query file {path}: {e}")))?
+        }
+        None => a.query.clone(),
+    };
+    let store = Store::open_read_only(&a.store)?;
+    let catalog = Catalog::load(&store, ctx.config.change.static_threshold)?;
+    let plan = query::compile(&text, &catalog).map_err(|error| Report {
+        error,
+        query: text.clone(),
+        color: stderr_color(),
+    })?;
+    if a.explain {
+        let lines = query::sqlite_plan(store.conn(), &plan)?;
+        print!("{}", query::explain(&plan, Some(&lines)));
+        return Ok(());
+    }
+    let result = query::execute(store.conn(), &plan)?;
+    for n in &result.notes {
+        log(ctx, format!("note: {n}"));
+    }
+    if let Some(out) = &a.out {
+        let batch =
+            result.to_record_batch().map_err(|e| StoreError::Parquet { path: out.clone(), message: e.to_string() })?;
+        let written = write_batch(out, "query", &batch)?;
+        if json(ctx) {
+            let cols: Vec<&str> = result.columns.iter().map(|c| c.name.as_str()).collect();
+            return print_json(&serde_json::json!({
+                "out": out.display().to_string(), "rows": written.row_count, "bytes": written.size_bytes, "columns": cols,
+            }));
+        }
+        println!("{} rows written to {}", written.row_count, out.display());
+        return Ok(());
+    }
+    match ctx.format {
+        Format::Json => print_json(&query::exec::JsonRows(&result))?,
+        Format::Csv => print!("{}", csv(&result)),
+        _ => {
+            let header: Vec<&str> = result.columns.iter().map(|c| c.name.as_str()).collect();
+            let rows: Vec<Vec<String>> = (0..result.rows.len())
+                .map(|r| (0..header.len()).map(|c| result.cell(r, c, Some(3), "-")).collect())
+                .collect();
+            print_table(&header, &rows);
+            if rows.is_empty() {
+                log(ctx, "(no rows)");
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Comma-separated with a header; reals exact; fields with `,`, `"` or a
+/// line break quoted.
+fn csv(r: &QueryResult) -> String {
+    let quote = |s: &str| {
+        if s.contains([',', '"', '\n', '\r']) { format!("\"{}\"", s.replace('"', "\"\"")) } else { s.to_string() }
+    };
+    let mut out = r.columns.iter().map(|c| quote(&c.name)).collect::<Vec<_>>().join(",");
+    out.push('\n');
+    for i in 0..r.rows.len() {
+        let cells: Vec<String> = (0..r.columns.len()).map(|c| quote(&r.cell(i, c, None, ""))).collect();
+        out.push_str(&cells.join(","));
+        out.push('\n');
+    }
+    out
+}
