@@ -22,6 +22,7 @@
 //! - [`evidence`]: voxel ray casting and directional hit/free evidence, ε_l.
 //! - [`eval`]: metrics against ground truth (Umeyama, ATE, rigid residual).
 //! - [`store`]: the only module that touches SQLite and Parquet.
+//! - [`render`]: top-down pictures (PNG) of a store and the HTML report.
 //! - [`sim`]: a simulated multi-session construction site with ground truth.
 //! - [`config`]: one `Config`, a sub-struct per stage.
 //! - [`cli`]: the `seam` command line.
@@ -54,6 +55,7 @@ pub mod graph;
 pub mod io;
 pub mod pipeline;
 pub mod registration;
+pub mod render;
 pub mod sensor;
 pub mod sim;
 pub mod store;

@@ -18,6 +18,8 @@ mod init;
 mod output;
 mod poses;
 mod rebuild;
+mod render;
+mod report;
 mod sessions;
 mod simulate;
 
@@ -80,6 +82,10 @@ pub enum Command {
     Export(export::ExportArgs),
     /// Recompute a store from the raw scans into a new store (same sessions, order, names).
     Rebuild(rebuild::RebuildArgs),
+    /// Draw a top-down picture (PNG): static map, lifelong map, changes or trajectories.
+    Render(render::RenderArgs),
+    /// Write a self-contained HTML report: sessions, what changed, pictures.
+    Report(report::ReportArgs),
 }
 
 /// Shared settings resolved once from the global flags.
@@ -131,5 +137,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Eval(c) => eval::run(&ctx, c),
         Command::Export(a) => export::run(&ctx, a),
         Command::Rebuild(a) => rebuild::run(&ctx, a),
+        Command::Render(a) => render::run(&ctx, a),
+        Command::Report(a) => report::run(&ctx, a),
     }
 }

@@ -28,6 +28,7 @@ mod evidence_rows;
 mod files;
 mod lifelong;
 pub mod map_export;
+mod render_rows;
 mod rows;
 mod schema;
 
@@ -36,6 +37,7 @@ pub use check::{CheckReport, FileProblem};
 pub use evidence_rows::*;
 pub use files::{FileRecord, ScanWriter, file_paths, insert_file, read_scan_row_group};
 pub use lifelong::*;
+pub use render_rows::{MapExtent, for_each_map_voxel, has_table, map_extent};
 pub use rows::*;
 pub use schema::{SCHEMA_SQL, SCHEMA_VERSION};
 
