@@ -23,6 +23,7 @@
 //! - [`eval`]: metrics against ground truth (Umeyama, ATE, rigid residual).
 //! - [`store`]: the only module that touches SQLite and Parquet.
 //! - [`query`]: the query language: lexer, parser, planner to parameterised SQL, execution.
+//! - [`render`]: top-down pictures (PNG) of a store and the HTML report.
 //! - [`sim`]: a simulated multi-session construction site with ground truth.
 //! - [`config`]: one `Config`, a sub-struct per stage.
 //! - [`cli`]: the `seam` command line.
@@ -56,6 +57,7 @@ pub mod io;
 pub mod pipeline;
 pub mod query;
 pub mod registration;
+pub mod render;
 pub mod sensor;
 pub mod sim;
 pub mod store;

@@ -66,6 +66,15 @@ pub fn exit_kind(err: &anyhow::Error) -> ExitKind {
         {
             return ExitKind::Query;
         }
+        if let Some(e) = cause.downcast_ref::<crate::render::RenderError>() {
+            use crate::render::RenderError as R;
+            return match e {
+                R::Store(s) => store_kind(s),
+                R::NoSuchSession { .. } => ExitKind::Data,
+                R::Usage(_) => ExitKind::Usage,
+                R::Io { .. } | R::Encode(_) => ExitKind::Internal,
+            };
+        }
         if cause.downcast_ref::<super::UsageError>().is_some() {
             return ExitKind::Usage;
         }

@@ -19,6 +19,8 @@ mod output;
 mod poses;
 mod query;
 mod rebuild;
+mod render;
+mod report;
 mod sessions;
 mod simulate;
 mod zones;
@@ -87,6 +89,10 @@ pub enum Command {
     /// Named zones for queries: add, list, rm.
     #[command(subcommand)]
     Zones(zones::ZonesCommand),
+    /// Draw a top-down picture (PNG): static map, lifelong map, changes or trajectories.
+    Render(render::RenderArgs),
+    /// Write a self-contained HTML report: sessions, what changed, pictures.
+    Report(report::ReportArgs),
 }
 
 /// Shared settings resolved once from the global flags.
@@ -140,5 +146,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Rebuild(a) => rebuild::run(&ctx, a),
         Command::Query(a) => query::run(&ctx, a),
         Command::Zones(c) => zones::run(&ctx, c),
+        Command::Render(a) => render::run(&ctx, a),
+        Command::Report(a) => report::run(&ctx, a),
     }
 }
