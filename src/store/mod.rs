@@ -26,10 +26,13 @@ mod check;
 pub mod evidence_files;
 mod evidence_rows;
 mod files;
+pub mod geoparquet;
+pub mod las_export;
 mod lifelong;
 pub mod map_export;
 mod rows;
 mod schema;
+pub mod trajectory_export;
 
 pub use alignment::*;
 pub use check::{CheckReport, FileProblem};
