@@ -140,7 +140,8 @@ fn exports_point_labels_per_session_with_a_catalog() {
 
     // With it, the table is replaced whole; JSON lists what was written.
     std::fs::write(out.join("point_labels/session=2/stale.parquet"), b"old").unwrap();
-    let o = run(&["export", root.to_str().unwrap(), out.to_str().unwrap(), "--overwrite", "--format", "json"]);
+    let args = ["export", root.to_str().unwrap(), out.to_str().unwrap(), "--tables", "point_labels", "--overwrite"];
+    let o = run(&[&args[..], &["--format", "json"]].concat());
     assert!(o.status.success(), "{}", stderr(&o));
     let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
     let parts = v["partitions"].as_array().unwrap();
@@ -172,13 +173,25 @@ fn store_without_labels_exports_an_empty_table() {
     let root = tmp.path().join("site.seam");
     init_store(&root);
     let out = tmp.path().join("out");
+    // The default tables: every one, empty, the unpartitioned ones with a
+    // file that carries the schema.
     let o = run(&["export", root.to_str().unwrap(), out.to_str().unwrap(), "--quiet"]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(out.join("point_labels").is_dir());
     assert!(names(&out.join("point_labels")).is_empty());
+    assert_eq!(
+        names(&out),
+        ["_catalog.json", "changes", "keyframes", "loop_edges", "map_voxels", "point_labels", "sessions"]
+    );
+    assert_eq!(names(&out.join("sessions")), ["part-0.parquet"]);
     let cat: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("_catalog.json")).unwrap()).unwrap();
-    assert_eq!(cat["tables"][0]["row_count"], 0);
+    let order: Vec<&str> = cat["tables"].as_array().unwrap().iter().map(|t| t["name"].as_str().unwrap()).collect();
+    assert_eq!(order, ["sessions", "keyframes", "loop_edges", "map_voxels", "changes", "point_labels"]);
+    assert!(cat["tables"].as_array().unwrap().iter().all(|t| t["row_count"] == 0), "{cat}");
+    assert_eq!(table(&cat, "sessions")["geometry"]["geometry_types"], serde_json::json!(["LineString Z"]));
+    assert_eq!(table(&cat, "sessions")["geometry"]["crs"]["type"], "EngineeringCRS");
+    assert_eq!(table(&cat, "point_labels")["format"], "Parquet");
 
     // Not a store: exit 4, nothing written.
     let o = run(&["export", tmp.path().join("nope").to_str().unwrap(), tmp.path().join("o2").to_str().unwrap()]);
@@ -231,8 +244,16 @@ fn change_event(s: i64, k: usize) -> ChangeEvent {
 /// [`VOXELS`] voxels on session 3's version, and [`EVENTS`] change events;
 /// and its writer, still open (see [`setup`]).
 fn setup_lifelong(tmp: &Path) -> (std::path::PathBuf, Store) {
+    setup_lifelong_in(tmp, None)
+}
+
+/// [`setup_lifelong`] in a store of CRS `crs` (`None`: local).
+fn setup_lifelong_in(tmp: &Path, crs: Option<&str>) -> (std::path::PathBuf, Store) {
     let root = tmp.join("site.seam");
-    init_store(&root);
+    match crs {
+        Some(c) => assert!(run(&["init", root.to_str().unwrap(), "--crs", c]).status.success()),
+        None => init_store(&root),
+    }
     let mut store = Store::open(&root).unwrap();
     store
         .transaction(|tx| -> Result<(), StoreError> {
@@ -266,14 +287,20 @@ fn read_parquet(path: &Path) -> (arrow_schema::SchemaRef, Option<RecordBatch>) {
 }
 
 fn columns(schema: &arrow_schema::Schema) -> Vec<String> {
-    schema.fields().iter().map(|f| format!("{}:{}:{}", f.name(), f.data_type(), f.is_nullable())).collect()
+    let type_name = |t: &arrow_schema::DataType| match t {
+        arrow_schema::DataType::Struct(f) => {
+            format!("Struct<{}>", f.iter().map(|c| c.name().as_str()).collect::<Vec<_>>().join(","))
+        }
+        t => t.to_string(),
+    };
+    schema.fields().iter().map(|f| format!("{}:{}:{}", f.name(), type_name(f.data_type()), f.is_nullable())).collect()
 }
 
 fn col<'a, T: 'static>(b: &'a RecordBatch, name: &str) -> &'a T {
     b.column_by_name(name).unwrap_or_else(|| panic!("no column {name}")).as_any().downcast_ref::<T>().unwrap()
 }
 
-const MAP_COLUMNS: [&str; 16] = [
+const MAP_COLUMNS: [&str; 18] = [
     "voxel_id:Int64:false",
     "kx:Int32:false",
     "ky:Int32:false",
@@ -290,9 +317,11 @@ const MAP_COLUMNS: [&str; 16] = [
     "category_session:Int32:false",
     "owner_session:Int32:false",
     "owner_keyframe:Int32:false",
+    "geometry:Binary:false",
+    "bbox:Struct<xmin,ymin,xmax,ymax>:false",
 ];
 
-const CHANGE_COLUMNS: [&str; 8] = [
+const CHANGE_COLUMNS: [&str; 11] = [
     "event_id:Int64:false",
     "voxel_id:Int64:false",
     "x_m:Float64:false",
@@ -301,6 +330,9 @@ const CHANGE_COLUMNS: [&str; 8] = [
     "category:Utf8:false",
     "eps_g_before:Float32:true",
     "eps_g_after:Float32:false",
+    "volume_m3:Float64:false",
+    "geometry:Binary:false",
+    "bbox:Struct<xmin,ymin,xmax,ymax>:false",
 ];
 
 /// The voxel ids of a map file, checking the rows are in spatial order.
@@ -408,7 +440,7 @@ fn exports_static_map_lifelong_map_and_changes() {
     // The catalog describes each table: rows, columns, frame, filter.
     let cat = catalog(&out);
     let order: Vec<&str> = cat["tables"].as_array().unwrap().iter().map(|t| t["name"].as_str().unwrap()).collect();
-    assert_eq!(order, ["static_map", "lifelong_map", "changes"]);
+    assert_eq!(order, ["changes", "static_map", "lifelong_map"]);
     let st = table(&cat, "static_map");
     assert_eq!(st["row_count"], statics.len());
     assert_eq!(st["filter"], "eps_g < 0.5");
@@ -491,7 +523,7 @@ fn store_without_a_lifelong_map_exports_empty_tables_with_their_schema() {
     assert!(names(&out.join("changes")).is_empty());
     let cat = catalog(&out);
     let order: Vec<&str> = cat["tables"].as_array().unwrap().iter().map(|t| t["name"].as_str().unwrap()).collect();
-    assert_eq!(order, ["point_labels", "static_map", "lifelong_map", "changes"]);
+    assert_eq!(order, ["changes", "point_labels", "static_map", "lifelong_map"]);
     assert_eq!(table(&cat, "point_labels")["row_count"], 250 + 1234);
     for t in ["static_map", "lifelong_map", "changes"] {
         assert_eq!(table(&cat, t)["row_count"], 0, "{t}");
@@ -509,7 +541,8 @@ fn unknown_map_table_names_every_known_table() {
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
     let err = stderr(&o);
     assert!(err.contains("\"change\""), "{err}");
-    assert!(err.contains("known tables: point_labels, static_map, lifelong_map, changes"), "{err}");
+    let known = "sessions, keyframes, loop_edges, map_voxels, changes, point_labels, static_map, lifelong_map";
+    assert!(err.contains(&format!("known tables: {known}")), "{err}");
     assert!(!out.exists(), "nothing is written");
 }
 
@@ -542,9 +575,35 @@ fn ingested_site_exports_what_the_store_holds() {
         assert!(o.status.success(), "{}", stderr(&o));
     }
     let out = tmp.path().join("out");
-    let tables = "point_labels,static_map,lifelong_map,changes";
+    let tables = "point_labels,static_map,lifelong_map,changes,sessions,keyframes,loop_edges";
     let o = run(&["export", root.to_str().unwrap(), out.to_str().unwrap(), "--tables", tables, "--quiet"]);
     assert!(o.status.success(), "{}", stderr(&o));
+
+    // Keyframes hold exactly the poses `seam poses` prints, per session.
+    let o = run(&["poses", root.to_str().unwrap(), "--format", "json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let poses: Vec<serde_json::Value> = serde_json::from_str(&stdout(&o)).unwrap();
+    let mut seen = 0;
+    for s in [1, 2] {
+        let (_, b) = read_parquet(&out.join(format!("keyframes/session={s}/part-0.parquet")));
+        let b = b.unwrap();
+        let want: Vec<&serde_json::Value> = poses.iter().filter(|p| p["session"] == s).collect();
+        assert_eq!(b.num_rows(), want.len(), "session {s}");
+        for (r, p) in want.iter().enumerate() {
+            assert_eq!(i64::from(col::<Int32Array>(&b, "keyframe_index").value(r)), p["keyframe"].as_i64().unwrap());
+            for c in ["x_m", "y_m", "z_m", "qx", "qy", "qz", "qw"] {
+                let got = col::<Float64Array>(&b, c).value(r);
+                assert!((got - p[c].as_f64().unwrap()).abs() < 1e-9, "session {s} row {r} {c}: {got} vs {}", p[c]);
+            }
+        }
+        seen += want.len();
+    }
+    assert_eq!(seen, poses.len());
+    let (_, b) = read_parquet(&out.join("sessions/part-0.parquet"));
+    let b = b.unwrap();
+    assert_eq!(col::<Int64Array>(&b, "session_id").values().to_vec(), [1, 2]);
+    assert_eq!(col::<StringArray>(&b, "status").value(1), "complete");
+    assert_eq!(b.column_by_name("geometry").unwrap().null_count(), 0, "both sessions have trajectories");
 
     let conn = rusqlite::Connection::open_with_flags(root.join("seam.db"), rusqlite::OpenFlags::SQLITE_OPEN_READ_ONLY)
         .unwrap();
@@ -578,4 +637,168 @@ fn ingested_site_exports_what_the_store_holds() {
         eprintln!("notice: ingest has no changes step yet; checked the empty export only");
         assert_eq!(lifelong, 0);
     }
+}
+
+// ---------------------------------------------------------------------------
+// GeoParquet metadata, LAS, bad outputs
+
+/// The `geo` key of a Parquet file's key-value metadata, parsed.
+fn geo_of(path: &Path) -> serde_json::Value {
+    let b = ParquetRecordBatchReaderBuilder::try_new(std::fs::File::open(path).unwrap()).unwrap();
+    let kv = b.metadata().file_metadata().key_value_metadata().cloned().unwrap_or_default();
+    let geo = kv.iter().find(|k| k.key == "geo").unwrap_or_else(|| panic!("{}: no geo key", path.display()));
+    serde_json::from_str(geo.value.as_deref().unwrap()).unwrap()
+}
+
+#[test]
+fn map_tables_are_geoparquet_in_the_stores_crs() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (root, _writer) = setup_lifelong_in(tmp.path(), Some("EPSG:32652"));
+    let out = tmp.path().join("out");
+    let o = run(&["export", root.to_str().unwrap(), out.to_str().unwrap(), "--tables", "map_voxels,changes"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+
+    let path = out.join("map_voxels/part-0.parquet");
+    let geo = geo_of(&path);
+    assert_eq!(geo["version"], "1.1.0");
+    assert_eq!(geo["primary_column"], "geometry");
+    let g = &geo["columns"]["geometry"];
+    assert_eq!(g["encoding"], "WKB");
+    assert_eq!(g["geometry_types"], serde_json::json!(["Point Z"]));
+    assert_eq!(g["crs"]["id"], serde_json::json!({"authority": "EPSG", "code": 32652}));
+    assert_eq!(g["crs"]["type"], "ProjectedCRS");
+    assert_eq!(g["covering"]["bbox"]["xmin"], serde_json::json!(["bbox", "xmin"]));
+    let (_, b) = read_parquet(&path);
+    let b = b.unwrap();
+    let (x, y, z) = (col::<Float64Array>(&b, "x_m"), col::<Float64Array>(&b, "y_m"), col::<Float64Array>(&b, "z_m"));
+    let wkb = col::<arrow_array::BinaryArray>(&b, "geometry");
+    let bbox = col::<arrow_array::StructArray>(&b, "bbox");
+    let bcol = |n: &str| bbox.column_by_name(n).unwrap().as_any().downcast_ref::<Float64Array>().unwrap().clone();
+    let (xmin, ymin, xmax, ymax) = (bcol("xmin"), bcol("ymin"), bcol("xmax"), bcol("ymax"));
+    for r in 0..b.num_rows() {
+        let p = [x.value(r), y.value(r), z.value(r)];
+        assert_eq!(wkb.value(r), seam::store::geoparquet::wkb_point_z(p), "row {r}");
+        assert_eq!([xmin.value(r), ymin.value(r), xmax.value(r), ymax.value(r)], [p[0], p[1], p[0], p[1]]);
+    }
+    // The file bbox encloses exactly the rows.
+    let fb: Vec<f64> = serde_json::from_value(g["bbox"].clone()).unwrap();
+    let min = |a: &Float64Array| a.values().iter().copied().fold(f64::INFINITY, f64::min);
+    let max = |a: &Float64Array| a.values().iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    // (serde_json's default parser may be an ulp off; the text is exact.)
+    let want = [min(x), min(y), min(z), max(x), max(y), max(z)];
+    assert!(fb.iter().zip(want).all(|(a, b)| (a - b).abs() < 1e-12), "{fb:?} vs {want:?}");
+    // ~100k-row groups are the writer's; this file is one.
+    let reader = ParquetRecordBatchReaderBuilder::try_new(std::fs::File::open(&path).unwrap()).unwrap();
+    assert_eq!(reader.metadata().num_row_groups(), 1);
+    let cc = reader.metadata().row_group(0).column(0).compression();
+    assert!(matches!(cc, parquet::basic::Compression::ZSTD(_)), "{cc:?}");
+
+    // Each changes partition: volume_m3 is the voxel, the catalog lists units.
+    let (_, b) = read_parquet(&out.join("changes/session=2/part-0.parquet"));
+    let v = col::<Float64Array>(&b.unwrap(), "volume_m3").clone();
+    assert!(v.values().iter().all(|&m| (m - VOXEL_M.powi(3)).abs() < 1e-12));
+    let cat = catalog(&out);
+    let ch = table(&cat, "changes");
+    assert_eq!(ch["format"], "GeoParquet 1.1.0");
+    let unit = |n: &str| ch["columns"].as_array().unwrap().iter().find(|c| c["name"] == n).unwrap()["unit"].clone();
+    assert_eq!((unit("volume_m3"), unit("x_m"), unit("eps_g_after")), ("m^3".into(), "m".into(), "1".into()));
+    assert_eq!(ch["geometry"]["crs"]["name"], "WGS 84 / UTM zone 52N");
+    assert_eq!(ch["geometry"]["crs_complete"], true);
+    assert_eq!(ch["partitions"][1]["bbox"].as_array().unwrap().len(), 6);
+    assert_eq!(cat["crs"], "EPSG:32652");
+}
+
+#[test]
+fn las_export_carries_eps_g_and_change_class_as_extra_bytes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (root, _writer) = setup_lifelong_in(tmp.path(), Some("EPSG:32652"));
+    let out = tmp.path().join("out");
+    let args = ["export", root.to_str().unwrap(), out.to_str().unwrap(), "--tables", "map_voxels,static_map", "--las"];
+    let o = run(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(names(&out.join("las")), ["lifelong_map.laz", "static_map.laz"]);
+
+    // LAS point i is map_voxels row i; static_map.laz is its ε_g < 0.5 rows.
+    let (_, b) = read_parquet(&out.join("map_voxels/part-0.parquet"));
+    let b = b.unwrap();
+    let eps = col::<Float32Array>(&b, "eps_g");
+    let cats = col::<StringArray>(&b, "category");
+    let x = col::<Float64Array>(&b, "x_m");
+    for (file, only_static) in [("lifelong_map.laz", false), ("static_map.laz", true)] {
+        let mut r = las::Reader::from_path(out.join("las").join(file)).unwrap();
+        let h = r.header().clone();
+        assert_eq!((h.version().major, h.version().minor), (1, 4));
+        assert!(h.has_wkt_crs(), "LAS 1.4 point format 6 sets the WKT bit");
+        let wkt = h.all_vlrs().find(|v| v.user_id == "LASF_Projection" && v.record_id == 2112).unwrap();
+        assert!(String::from_utf8_lossy(&wkt.data).contains("AUTHORITY[\"EPSG\",\"32652\"]]"));
+        let eb = h.all_vlrs().find(|v| v.user_id == "LASF_Spec" && v.record_id == 4).unwrap();
+        assert_eq!(eb.data.len(), 2 * 192);
+        assert_eq!(&eb.data[4..9], b"eps_g");
+        assert_eq!(&eb.data[192 + 4..192 + 16], b"change_class");
+        let codes = h.all_vlrs().find(|v| v.user_id == "seam" && v.record_id == 1).unwrap();
+        assert!(String::from_utf8_lossy(&codes.data).contains("3 = deleted_non_overlap"));
+        let rows: Vec<usize> = (0..b.num_rows()).filter(|&i| !only_static || eps.value(i) < 0.5).collect();
+        assert_eq!(h.number_of_points(), rows.len() as u64, "{file}");
+        let points: Vec<las::Point> = r.read_all().unwrap().points().map(|p| p.unwrap()).collect();
+        for (p, &i) in points.iter().zip(&rows) {
+            assert_eq!(f32::from_le_bytes(p.extra_bytes[..4].try_into().unwrap()), eps.value(i), "{file} row {i}");
+            let code = Category::ALL.iter().position(|c| c.as_str() == cats.value(i)).unwrap() as u8;
+            assert_eq!(p.extra_bytes[4], code, "{file} row {i}");
+            assert!((p.x - x.value(i)).abs() <= 0.0005 + 1e-9, "{file} row {i}: {} vs {}", p.x, x.value(i));
+        }
+    }
+    let cat = catalog(&out);
+    assert_eq!(cat["las"]["files"][0]["name"], "static_map");
+    assert_eq!(cat["las"]["files"][1]["point_count"], VOXELS);
+    assert_eq!(cat["las"]["extra_bytes"][1]["codes"]["5"], "emerged_non_overlap");
+
+    // pyarrow, DuckDB and laspy agree (where python3 and the modules exist).
+    run_client_check(&out, None);
+
+    // OUT/las exists: refused without --overwrite, nothing touched.
+    let before = snapshot_files(&out);
+    let o = run(&["export", root.to_str().unwrap(), out.to_str().unwrap(), "--tables", "sessions", "--las"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("las") && stderr(&o).contains("--overwrite"), "{}", stderr(&o));
+    assert_eq!(snapshot_files(&out), before);
+}
+
+#[test]
+fn bad_outputs_are_refused_before_anything_is_written() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (root, writer) = setup_lifelong(tmp.path());
+    drop(writer);
+    let before = store_state(&root);
+
+    // OUT is a file: usage error, the file and the store untouched.
+    let file = tmp.path().join("out.txt");
+    std::fs::write(&file, b"not a folder").unwrap();
+    let o = run(&["export", root.to_str().unwrap(), file.to_str().unwrap(), "--las"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("not a folder"), "{}", stderr(&o));
+    assert_eq!(std::fs::read(&file).unwrap(), b"not a folder");
+
+    // An unknown table: exit 2 naming every known one, OUT not created.
+    let out = tmp.path().join("out");
+    let o = run(&["export", root.to_str().unwrap(), out.to_str().unwrap(), "--tables", "sessions,voxels"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("\"voxels\"") && stderr(&o).contains("map_voxels, changes"), "{}", stderr(&o));
+    assert!(!out.exists());
+
+    // --las-uncompressed without --las: clap refuses it.
+    let o = run(&["export", root.to_str().unwrap(), out.to_str().unwrap(), "--las-uncompressed"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(!out.exists());
+
+    // A missing store: exit 4, OUT not created.
+    let o = run(&["export", tmp.path().join("missing.seam").to_str().unwrap(), out.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(4), "{}", stderr(&o));
+    assert!(!out.exists());
+    assert_same_state(&before, &store_state(&root), "after refused exports");
+
+    // And a good export leaves the store as it was too.
+    let o = run(&["export", root.to_str().unwrap(), out.to_str().unwrap(), "--las", "--las-uncompressed", "--quiet"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(names(&out.join("las")), ["lifelong_map.las", "static_map.las"]);
+    assert_same_state(&before, &store_state(&root), "after an export");
 }

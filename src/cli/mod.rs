@@ -80,7 +80,7 @@ pub enum Command {
     /// Measure the store against ground truth.
     #[command(subcommand)]
     Eval(eval::EvalCommand),
-    /// Write tables of a store as Parquet for analysts.
+    /// Write tables of a store as GeoParquet (and the maps as LAS/LAZ) for analysts.
     Export(export::ExportArgs),
     /// Recompute a store from the raw scans into a new store (same sessions, order, names).
     Rebuild(rebuild::RebuildArgs),

@@ -70,11 +70,24 @@ pub fn write_table(store: &Store, rel_path: &str, kind: &str, batch: &RecordBatc
 /// `final_path` but the complete, synced file. A failed write removes its
 /// temporary file. Fault point `<step>:before_rename`.
 pub fn write_batch(final_path: &Path, step: &str, batch: &RecordBatch) -> Result<WrittenFile, StoreError> {
+    write_batch_with(final_path, step, batch, ROW_GROUP_ROWS, Vec::new())
+}
+
+/// [`write_batch`] with row groups of `row_group_rows` and `key_value`
+/// pairs in the file's key-value metadata (GeoParquet's `geo`).
+pub fn write_batch_with(
+    final_path: &Path,
+    step: &str,
+    batch: &RecordBatch,
+    row_group_rows: usize,
+    key_value: Vec<(String, String)>,
+) -> Result<WrittenFile, StoreError> {
     if let Some(dir) = final_path.parent() {
         std::fs::create_dir_all(dir).map_err(|e| StoreError::io(dir, e))?;
     }
     let tmp_path = final_path.with_extension(format!("tmp-{}", std::process::id()));
-    let (size_bytes, blake3) = match write_tmp(&tmp_path, batch) {
+    let props = writer_props(&batch.schema(), row_group_rows, key_value);
+    let (size_bytes, blake3) = match write_tmp(&tmp_path, batch, props) {
         Ok(v) => v,
         Err(e) => {
             let _ = std::fs::remove_file(&tmp_path);
@@ -86,31 +99,47 @@ pub fn write_batch(final_path: &Path, step: &str, batch: &RecordBatch) -> Result
     Ok(WrittenFile { size_bytes, blake3, row_count: batch.num_rows() as u64 })
 }
 
-fn writer_props(schema: &Schema) -> WriterProperties {
+fn writer_props(schema: &Schema, row_group_rows: usize, key_value: Vec<(String, String)>) -> WriterProperties {
     let mut props = WriterProperties::builder()
         .set_compression(Compression::ZSTD(ZstdLevel::try_new(3).unwrap_or_default()))
-        .set_max_row_group_row_count(Some(ROW_GROUP_ROWS));
+        .set_max_row_group_row_count(Some(row_group_rows));
+    if !key_value.is_empty() {
+        props = props.set_key_value_metadata(Some(
+            key_value.into_iter().map(|(k, v)| parquet::file::metadata::KeyValue::new(k, v)).collect(),
+        ));
+    }
     // Floats compress far better split into byte streams; a dictionary of
-    // measured values only costs.
+    // measured values (or of WKB geometries, each distinct) only costs.
+    let is_float = |t: &DataType| matches!(t, DataType::Float16 | DataType::Float32 | DataType::Float64);
     for f in schema.fields() {
-        if matches!(f.data_type(), DataType::Float16 | DataType::Float32 | DataType::Float64) {
-            let col = ColumnPath::from(f.name().as_str());
-            props = props
-                .set_column_dictionary_enabled(col.clone(), false)
-                .set_column_encoding(col, Encoding::BYTE_STREAM_SPLIT);
+        let mut leaves: Vec<(ColumnPath, &DataType)> = vec![(ColumnPath::from(f.name().as_str()), f.data_type())];
+        if let DataType::Struct(children) = f.data_type() {
+            leaves = children
+                .iter()
+                .map(|c| (ColumnPath::new(vec![f.name().clone(), c.name().clone()]), c.data_type()))
+                .collect();
+        }
+        for (col, t) in leaves {
+            if is_float(t) {
+                props = props
+                    .set_column_dictionary_enabled(col.clone(), false)
+                    .set_column_encoding(col, Encoding::BYTE_STREAM_SPLIT);
+            } else if super::geoparquet::is_geometry_column(f) {
+                props = props.set_column_dictionary_enabled(col, false);
+            }
         }
     }
     props.build()
 }
 
 /// Writes and fsyncs the temporary file; returns its size and blake3.
-fn write_tmp(tmp_path: &Path, batch: &RecordBatch) -> Result<(u64, String), StoreError> {
+fn write_tmp(tmp_path: &Path, batch: &RecordBatch, props: WriterProperties) -> Result<(u64, String), StoreError> {
     let perr = |e: &dyn std::fmt::Display| StoreError::Parquet { path: tmp_path.to_path_buf(), message: e.to_string() };
     let file = File::create(tmp_path).map_err(|e| StoreError::io(tmp_path, e))?;
     let sink =
         HashingWriter { inner: BufWriter::with_capacity(1 << 20, file), hasher: blake3::Hasher::new(), bytes: 0 };
     let schema = batch.schema();
-    let mut writer = ArrowWriter::try_new(sink, schema.clone(), Some(writer_props(&schema))).map_err(|e| perr(&e))?;
+    let mut writer = ArrowWriter::try_new(sink, schema, Some(props)).map_err(|e| perr(&e))?;
     // The writer cuts the batch into row groups of ROW_GROUP_ROWS.
     writer.write(batch).map_err(|e| perr(&e))?;
     let mut sink = writer.into_inner().map_err(|e| perr(&e))?;
@@ -304,7 +333,8 @@ pub fn write_point_labels(store: &Store, rel_path: &str, labels: &PointLabels) -
 /// Writes point labels to `path` outside any store (`seam export`), with
 /// the same publish protocol. Fault point `export:before_rename`.
 pub fn export_point_labels(path: &Path, labels: &PointLabels) -> Result<WrittenFile, StoreError> {
-    write_batch(path, "export", &point_labels_batch(path, labels)?)
+    let rows = super::geoparquet::EXPORT_ROW_GROUP_ROWS;
+    write_batch_with(path, "export", &point_labels_batch(path, labels)?, rows, Vec::new())
 }
 
 // ---------------------------------------------------------------------------

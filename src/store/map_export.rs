@@ -1,7 +1,7 @@
 //! The lifelong map and its change events as analyst Parquet (`seam export
 //! --tables static_map,lifelong_map,changes`), written with the evidence
-//! files' writer ([`write_batch`]: zstd, row groups, split floats, publish
-//! protocol).
+//! files' writer ([`super::evidence_files::write_batch_with`]: zstd, row
+//! groups, split floats, publish protocol) as GeoParquet.
 //!
 //! The three tables are read from SQLite in one read transaction
 //! ([`read_map_export`]), so a static map, lifelong map and change list
@@ -10,17 +10,22 @@
 //! | table | columns |
 //! |-------|---------|
 //! | `map_voxels` (`static_map`, `lifelong_map`) | `voxel_id` int64, `kx ky kz` int32, `x_m y_m z_m` float64, `eps_g eps_l` float32, `points` int32, `first_session last_seen_session` int32, `category` string, `category_session owner_session owner_keyframe` int32 |
-//! | `changes` (one file per session) | `event_id` int64, `voxel_id` int64, `x_m y_m z_m` float64, `category` string, `eps_g_before` float32 (null: new voxel), `eps_g_after` float32 |
+//! | `changes` (one file per session) | `event_id` int64, `voxel_id` int64, `x_m y_m z_m` float64, `category` string, `eps_g_before` float32 (null: new voxel), `eps_g_after` float32, `volume_m3` float64 |
+//!
+//! Both end with the GeoParquet `geometry` (the centroid as a WKB `Point Z`)
+//! and `bbox` covering columns ([`super::geoparquet`]).
 //!
 //! Rows are sorted spatially: by the Z-order (Morton) code of the voxel key
 //! on the map's grid, then by id, so a row group covers a compact box and a
 //! reader filtering on `x_m`/`y_m`/`z_m` statistics skips most of them.
 
-use super::evidence_files::{WrittenFile, write_batch};
+use super::evidence_files::WrittenFile;
+use super::geoparquet::{Crs, GeoSummary, Geometry, GeometryType, geo_columns, geometry_fields, write_geoparquet};
 use super::{ChangeEventRow, MapState, SessionId, Store, StoreError, WorldBox, change_events_in, map_state, sql};
 use crate::change::MapVoxel;
 use arrow_array::{ArrayRef, Float32Array, Float64Array, Int32Array, Int64Array, RecordBatch, StringArray};
 use arrow_schema::{DataType, Field, Schema, SchemaRef};
+use rusqlite::Connection;
 use std::collections::HashMap;
 use std::path::Path;
 use std::sync::Arc;
@@ -68,10 +73,16 @@ impl MapExport {
 /// to in one read transaction. A store whose schema predates the lifelong
 /// map (opened read-only, so not migrated) reads as an empty map.
 pub fn read_map_export(store: &Store) -> Result<MapExport, StoreError> {
-    let root = store.root();
     // A deferred transaction on a read-only connection: every read below
     // sees the same WAL snapshot. Dropping it rolls back, which is a no-op.
-    let tx = store.conn().unchecked_transaction().map_err(|e| sql(root, e))?;
+    let tx = store.conn().unchecked_transaction().map_err(|e| sql(store.root(), e))?;
+    read_map_export_in(store, &tx)
+}
+
+/// [`read_map_export`] inside the caller's read transaction `tx` (on
+/// `store`'s connection), so other tables can be read in the same snapshot.
+pub fn read_map_export_in(store: &Store, tx: &Connection) -> Result<MapExport, StoreError> {
+    let root = store.root();
     let voxel_size_m = store.meta()?.voxel_size_m;
     // Every table the reads below touch (`map_tiles` is their spatial index).
     let needed = ["map_voxels", "map_tiles", "map_state", "change_events", "session_changes"];
@@ -88,11 +99,11 @@ pub fn read_map_export(store: &Store) -> Result<MapExport, StoreError> {
     if present < needed.len() as i64 {
         return Ok(MapExport { voxel_m: voxel_size_m, ..MapExport::default() });
     }
-    let state = map_state(&tx)?;
+    let state = map_state(tx)?;
     let voxel_m = state.map(|s| s.voxel_m).filter(|v| *v > 0.0).unwrap_or(voxel_size_m);
-    let mut voxels = super::map_voxels_in(&tx, &WorldBox::ALL, None)?;
+    let mut voxels = super::map_voxels_in(tx, &WorldBox::ALL, None)?;
     voxels.sort_unstable_by_key(|v| (z_order(v.key.0), v.voxel_id));
-    let mut events = change_events_in(&tx, &WorldBox::ALL, i64::MIN)?;
+    let mut events = change_events_in(tx, &WorldBox::ALL, i64::MIN)?;
     events.sort_unstable_by_key(|e| (e.event.session_id, z_order(key_of(&e.event.xyz_m, voxel_m)), e.event_id));
 
     let mut st = tx
@@ -170,6 +181,7 @@ pub fn map_voxels_schema() -> SchemaRef {
         field("owner_session", DataType::Int32, false, "the voxel moves with this session's keyframe owner_keyframe"),
         field("owner_keyframe", DataType::Int32, false, "keyframe index in owner_session"),
     ]);
+    f.extend(geometry_fields(false, "the centroid as a Point Z"));
     Arc::new(Schema::new(f))
 }
 
@@ -189,7 +201,9 @@ pub fn changes_schema() -> SchemaRef {
         ),
         field("eps_g_before", DataType::Float32, true, "eps_g before the session; null: the voxel was new to the map"),
         field("eps_g_after", DataType::Float32, false, "eps_g after the session"),
+        field("volume_m3", DataType::Float64, false, "volume of the voxel that changed (the map's voxel edge cubed)"),
     ]);
+    f.extend(geometry_fields(false, "the centroid as a Point Z"));
     Arc::new(Schema::new(f))
 }
 
@@ -230,8 +244,9 @@ fn batch(path: &Path, schema: SchemaRef, cols: Vec<ArrayRef>) -> Result<RecordBa
         .map_err(|e| StoreError::Parquet { path: path.to_path_buf(), message: e.to_string() })
 }
 
-/// The `map_voxels` columns of `voxels`, in the given order.
-pub fn map_voxels_batch(path: &Path, voxels: &[&MapVoxel]) -> Result<RecordBatch, StoreError> {
+/// The `map_voxels` columns of `voxels`, in the given order, and the
+/// summary of their geometries.
+pub fn map_voxels_batch(path: &Path, voxels: &[&MapVoxel]) -> Result<(RecordBatch, GeoSummary), StoreError> {
     let it = || voxels.iter().copied();
     let mut cols = vec![i64_col(it().map(|v| v.voxel_id))];
     cols.extend((0..3).map(|i| Arc::new(Int32Array::from_iter_values(it().map(|v| v.key.0[i]))) as ArrayRef));
@@ -245,11 +260,19 @@ pub fn map_voxels_batch(path: &Path, voxels: &[&MapVoxel]) -> Result<RecordBatch
     cols.push(i32_col(path, "category_session", it().map(|v| v.category_session))?);
     cols.push(i32_col(path, "owner_session", it().map(|v| v.owner_session))?);
     cols.push(i32_col(path, "owner_keyframe", it().map(|v| v.owner_keyframe))?);
-    batch(path, map_voxels_schema(), cols)
+    let geo = geo_columns(&[GeometryType::PointZ], it().map(|v| Some(Geometry::PointZ(v.xyz_m))));
+    cols.extend([geo.geometry, geo.bbox]);
+    Ok((batch(path, map_voxels_schema(), cols)?, geo.summary))
 }
 
-/// The `changes` columns of `events`, in the given order.
-pub fn changes_batch(path: &Path, events: &[ChangeEventRow]) -> Result<RecordBatch, StoreError> {
+/// The `changes` columns of `events`, in the given order (each a voxel of
+/// `voxel_m`), and the summary of their geometries.
+pub fn changes_batch(
+    path: &Path,
+    events: &[ChangeEventRow],
+    voxel_m: f64,
+) -> Result<(RecordBatch, GeoSummary), StoreError> {
+    let geo = geo_columns(&[GeometryType::PointZ], events.iter().map(|e| Some(Geometry::PointZ(e.event.xyz_m))));
     let cols = vec![
         i64_col(events.iter().map(|e| e.event_id)),
         i64_col(events.iter().map(|e| e.event.voxel_id)),
@@ -259,19 +282,35 @@ pub fn changes_batch(path: &Path, events: &[ChangeEventRow]) -> Result<RecordBat
         str_col(events.iter().map(|e| e.event.category.as_str())),
         Arc::new(Float32Array::from_iter(events.iter().map(|e| e.event.eps_g_before))) as ArrayRef,
         f32_col(events.iter().map(|e| e.event.eps_g_after)),
+        f64_col(events.iter().map(|_| voxel_m.powi(3))),
+        geo.geometry,
+        geo.bbox,
     ];
-    batch(path, changes_schema(), cols)
+    Ok((batch(path, changes_schema(), cols)?, geo.summary))
 }
 
-/// Writes map voxels to `path` outside any store (`seam export`), with the
-/// publish protocol. Fault point `export:before_rename`.
-pub fn export_map_voxels(path: &Path, voxels: &[&MapVoxel]) -> Result<WrittenFile, StoreError> {
-    write_batch(path, "export", &map_voxels_batch(path, voxels)?)
+/// Writes map voxels to `path` outside any store (`seam export`) as
+/// GeoParquet in `crs`, with the publish protocol. Fault point
+/// `export:before_rename`.
+pub fn export_map_voxels(
+    path: &Path,
+    voxels: &[&MapVoxel],
+    crs: &Crs,
+) -> Result<(WrittenFile, GeoSummary), StoreError> {
+    let (b, geo) = map_voxels_batch(path, voxels)?;
+    Ok((write_geoparquet(path, &b, &geo, crs)?, geo))
 }
 
-/// Writes change events to `path` outside any store (`seam export`).
-pub fn export_changes(path: &Path, events: &[ChangeEventRow]) -> Result<WrittenFile, StoreError> {
-    write_batch(path, "export", &changes_batch(path, events)?)
+/// Writes change events (voxels of `voxel_m`) to `path` outside any store
+/// (`seam export`) as GeoParquet in `crs`.
+pub fn export_changes(
+    path: &Path,
+    events: &[ChangeEventRow],
+    voxel_m: f64,
+    crs: &Crs,
+) -> Result<(WrittenFile, GeoSummary), StoreError> {
+    let (b, geo) = changes_batch(path, events, voxel_m)?;
+    Ok((write_geoparquet(path, &b, &geo, crs)?, geo))
 }
 
 #[cfg(test)]

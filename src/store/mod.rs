@@ -26,11 +26,14 @@ mod check;
 pub mod evidence_files;
 mod evidence_rows;
 mod files;
+pub mod geoparquet;
+pub mod las_export;
 mod lifelong;
 pub mod map_export;
 mod render_rows;
 mod rows;
 mod schema;
+pub mod trajectory_export;
 mod zones;
 
 pub use alignment::*;

@@ -175,3 +175,34 @@ pub fn assert_same_state(want: &(String, Vec<(String, Vec<u8>)>), got: &(String,
         assert!(a.1 == b.1, "data file {} differs {what}", a.0);
     }
 }
+
+/// Runs `tests/clients/check_exports.py OUT [--expect EXPECT]` (pyarrow,
+/// DuckDB and laspy reading an export) and returns whether it ran. Without
+/// python3 or its modules it prints a notice and returns false, unless `CI`
+/// is set: CI must really run it, so there a missing reader is a failure.
+pub fn run_client_check(out: &Path, expect: Option<&Path>) -> bool {
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/clients/check_exports.py");
+    let mut cmd = Command::new("python3");
+    cmd.arg(&script).arg(out);
+    if let Some(e) = expect {
+        cmd.arg("--expect").arg(e);
+    }
+    let ci = std::env::var_os("CI").is_some();
+    let o = match cmd.output() {
+        Ok(o) => o,
+        Err(e) => {
+            assert!(!ci, "CI is set but python3 cannot run: {e}");
+            eprintln!("notice: python3 not found ({e}); skipping the client check (CI runs it)");
+            return false;
+        }
+    };
+    let text = format!("{}{}", stdout(&o), stderr(&o));
+    if o.status.code() == Some(77) {
+        assert!(!ci, "CI is set but the readers are missing (.ci/run installs them):\n{text}");
+        eprintln!("notice: {}; skipping the client check (CI runs it)", text.trim());
+        return false;
+    }
+    assert!(o.status.success(), "client check failed:\n{text}");
+    eprintln!("{text}");
+    true
+}
