@@ -111,11 +111,78 @@ pub fn run(ctx: &Ctx, a: DemoArgs) -> anyhow::Result<()> {
     for summary in &summaries {
         println!("  {}", summary.sentence());
     }
+    drop(store);
+    ask_questions(ctx, &store_path, &summaries)?;
+    let report = crate::render::report::write_report(
+        &store_path,
+        &a.out.join("report.html"),
+        &crate::render::report::ReportOptions::default(),
+    )?;
     println!(
-        "\nstore: {}  (try `seam info {0}`, `seam poses {0}`, `seam eval align {0} --gt {}`)",
+        "\nreport: {} ({} pictures, {:.1} MB; open it in a browser)",
+        report.path,
+        report.pictures.len(),
+        report.bytes as f64 / 1e6
+    );
+    println!(
+        "store: {}  (try `seam info {0}`, `seam poses {0}`, `seam eval align {0} --gt {}`)",
         store_path.display(),
         a.out.join("sessions").display()
     );
     log(ctx, format!("demo finished in {:.1} s", t0.elapsed().as_secs_f64()));
+    Ok(())
+}
+
+/// The zone the demo's questions name: the largest place that appeared in the
+/// last session, grown by 2 m (a site manager would draw it around the new
+/// work).
+pub const DEMO_ZONE: &str = "new work";
+
+/// Adds [`DEMO_ZONE`] and asks the store a few of the questions in `queries/`,
+/// printing each as the command a user would type and its answer.
+fn ask_questions(ctx: &Ctx, store_path: &std::path::Path, summaries: &[SessionSummary]) -> anyhow::Result<()> {
+    let last = summaries.last();
+    let biggest = last.and_then(|s| s.appeared.places.first().or(s.removed.places.first()));
+    let mut questions: Vec<String> = vec!["changes | count by session,category".into(), "volume since:s2".into()];
+    if let Some(place) = biggest {
+        let grow = 2.0;
+        let shape = store::ZoneShape::Box(store::WorldBox {
+            min_m: place.min_m.map(|v| v - grow),
+            max_m: place.max_m.map(|v| v + grow),
+        });
+        let mut s = Store::open(store_path)?;
+        s.transaction(|tx| store::insert_zone(tx, DEMO_ZONE, &shape))?;
+        let c = place.centroid_m;
+        questions.push(format!("changes in zone:\"{DEMO_ZONE}\" | count by session,category"));
+        questions.push(format!("history near:{:.1},{:.1},{:.1} r:1", c[0], c[1], c[2]));
+    }
+    questions.push("loops | count by session,kind,accepted".into());
+    let store = Store::open_read_only(store_path)?;
+    let catalog = crate::query::Catalog::load(&store, ctx.config.change.static_threshold)?;
+    if biggest.is_some() {
+        let b = &catalog.zones.iter().find(|z| z.name == DEMO_ZONE).map(|z| z.shape.bounds());
+        if let Some(b) = b {
+            println!(
+                "\n$ seam zones add {} \"{DEMO_ZONE}\" bbox:{:.1},{:.1},{:.1},{:.1},{:.1},{:.1}",
+                store_path.display(),
+                b.min_m[0],
+                b.min_m[1],
+                b.min_m[2],
+                b.max_m[0],
+                b.max_m[1],
+                b.max_m[2]
+            );
+        }
+    }
+    for q in &questions {
+        println!("\n$ seam query {} '{q}'", store_path.display());
+        let plan = crate::query::compile(q, &catalog).map_err(|error| crate::query::Report {
+            error,
+            query: q.clone(),
+            color: false,
+        })?;
+        let result = crate::query::execute(store.conn(), &plan)?;
+        super::query::print_result_table(ctx, &result);
+    }
     Ok(())
 }

@@ -76,18 +76,20 @@ pub fn run(ctx: &Ctx, a: QueryArgs) -> anyhow::Result<()> {
     match ctx.format {
         Format::Json => print_json(&query::exec::JsonRows(&result))?,
         Format::Csv => print!("{}", csv(&result)),
-        _ => {
-            let header: Vec<&str> = result.columns.iter().map(|c| c.name.as_str()).collect();
-            let rows: Vec<Vec<String>> = (0..result.rows.len())
-                .map(|r| (0..header.len()).map(|c| result.cell(r, c, Some(3), "-")).collect())
-                .collect();
-            print_table(&header, &rows);
-            if rows.is_empty() {
-                log(ctx, "(no rows)");
-            }
-        }
+        _ => print_result_table(ctx, &result),
     }
     Ok(())
+}
+
+/// The rows as aligned columns (reals to 3 decimals, NULL as `-`).
+pub(super) fn print_result_table(ctx: &Ctx, result: &QueryResult) {
+    let header: Vec<&str> = result.columns.iter().map(|c| c.name.as_str()).collect();
+    let rows: Vec<Vec<String>> =
+        (0..result.rows.len()).map(|r| (0..header.len()).map(|c| result.cell(r, c, Some(3), "-")).collect()).collect();
+    print_table(&header, &rows);
+    if rows.is_empty() {
+        log(ctx, "(no rows)");
+    }
 }
 
 /// Comma-separated with a header; reals exact; fields with `,`, `"` or a
