@@ -289,13 +289,14 @@ fn static_map_is_coloured_by_height_with_legend_and_scale_bar() {
     assert_eq!(j["drawn"], (GROUND * GROUND + 100 * 25) as u64, "the ephemeral block is not static");
     assert_eq!(j["colormap"], "viridis");
     // The tower's top is above the colour range's top: the LUT's top colour.
+    let range: Vec<f32> = j["colour_range"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap() as f32).collect();
+    assert!((range[1] as f64) < TOWER_TOP_Z && range[0] < range[1], "{range:?}");
     let (tx, ty) = pixel_of(&j, 5.0, 5.0);
     assert_eq!(png.at(tx, ty), VIRIDIS.high(), "tower top");
     // The lowest ground (x ≈ 0) is at or below the range's bottom.
     let (gx, gy) = pixel_of(&j, 0.1, 10.0);
     assert_eq!(png.at(gx, gy), VIRIDIS.low(), "lowest ground");
     // Mid-ramp ground has the colour of its height on the range.
-    let range: Vec<f32> = j["colour_range"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap() as f32).collect();
     let (mx, my) = pixel_of(&j, 10.1, 10.1);
     assert!(close(png.at(mx, my), VIRIDIS.of(ground_z(10.1) as f32, range[0], range[1]), 3), "mid ground");
     // Under the ephemeral block the static map shows the ground, not the block.
@@ -432,6 +433,9 @@ fn bbox_crops_and_zooms() {
     let tmp = tempfile::tempdir().unwrap();
     let root = synthetic_store(tmp.path());
     let path = tmp.path().join("zoom.png");
+    // Negative coordinates are values, not flags.
+    let (j, _) = render(&root, &path, &["--what", "static", "--bbox", "-5,-5.5,7,7"]);
+    assert!(j["world_bbox_m"][1].as_f64().unwrap() <= -5.5);
     let (j, png) = render(&root, &path, &["--what", "static", "--bbox", "3,3,7,7", "--width", "800"]);
     let b: Vec<f64> = j["world_bbox_m"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
     assert!(b[0] <= 3.0 && b[1] <= 3.0 && b[2] >= 7.0 && b[3] >= 7.0, "{b:?}");

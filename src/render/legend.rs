@@ -85,7 +85,7 @@ pub fn axes(c: &mut Canvas, z: &Sizes, view: &View) {
     // Axis names where they cannot collide with tick labels: x past the
     // last tick below the frame's right end, y above the frame's left end.
     c.text(r, b + tick + z.small * 2.4, z.small, Rgb::MUTED, Align::Right, "x (m)");
-    c.text(l - tick - 4.0, t - z.small * 0.5, z.small, Rgb::MUTED, Align::Right, "y (m)");
+    c.text(l - tick - 4.0, t - z.small * 1.1, z.small, Rgb::MUTED, Align::Right, "y (m)");
 }
 
 /// A heading line in the legend; returns the new cursor.

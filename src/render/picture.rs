@@ -104,7 +104,11 @@ fn titles(scene: &Scene, what: What, window: &Window, drawn: u64, threshold: f64
     };
     let frame = format!("world frame (seam poses), {}", scene.meta.crs);
     let v = format!("{} m", tick_label(scene.voxel_m));
-    let map_of = format!("map after {}", scene.window_label(&Window { from: all.to, to: all.to }));
+    let map_of = if scene.sessions.is_empty() {
+        "no sessions yet".to_string()
+    } else {
+        format!("map after {}", scene.window_label(&Window { from: all.to, to: all.to }))
+    };
     match what {
         What::Static => (
             format!("{site}: static map, coloured by height"),
