@@ -620,12 +620,27 @@ fn simulated_site_renders_and_reports() {
         };
         assert_eq!(j["drawn"].as_u64().unwrap(), want, "{what}");
         assert!(want > 0, "{what}: the simulated site has something to draw");
-        // Where voxels are, pixels are drawn: sample voxels of the map.
+        // Where voxels are, pixels are drawn: sample voxels of the static
+        // map, at the centre of their grid cell (what a voxel's square is
+        // drawn around; the cell holds the centroid).
         if what != "trajectories" {
-            let mut st =
-                conn.prepare("SELECT x_m, y_m FROM map_voxels WHERE eps_g < 0.5 AND voxel_id % 997 = 0").unwrap();
-            let pts: Vec<(f64, f64)> =
-                st.query_map([], |r| Ok((r.get(0)?, r.get(1)?))).unwrap().map(|r| r.unwrap()).collect();
+            let v = conn.query_row("SELECT voxel_m FROM map_state", [], |r| r.get::<_, f64>(0)).unwrap();
+            let mut st = conn
+                .prepare("SELECT kx, ky, x_m, y_m FROM map_voxels WHERE eps_g < 0.5 AND voxel_id % 997 = 0")
+                .unwrap();
+            let pts: Vec<(f64, f64)> = st
+                .query_map([], |r| {
+                    let (kx, ky, x, y): (i64, i64, f64, f64) = (r.get(0)?, r.get(1)?, r.get(2)?, r.get(3)?);
+                    assert_eq!(
+                        (kx, ky),
+                        ((x / v).floor() as i64, (y / v).floor() as i64),
+                        "the cell holds the centroid"
+                    );
+                    Ok(((kx as f64 + 0.5) * v, (ky as f64 + 0.5) * v))
+                })
+                .unwrap()
+                .map(|r| r.unwrap())
+                .collect();
             assert!(pts.len() > 20);
             for (x, y) in pts {
                 let (px, py) = pixel_of(&j, x, y);

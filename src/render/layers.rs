@@ -1,6 +1,9 @@
-//! The map layers, rastered straight from the store: each voxel centroid is
-//! projected to x/y and splatted as a square of its size (at least one
-//! pixel) into a per-pixel buffer that keeps the **maximum** of a value —
+//! The map layers, rastered straight from the store: each voxel's centre on
+//! the world grid (its key, not the centroid of its points: grid-aligned
+//! squares tile without the moiré of gaps and overlaps that centroids give)
+//! is projected to x/y and splatted as a square of the voxel's size (at
+//! least one pixel) into a per-pixel buffer that keeps the **maximum** of a
+//! value —
 //! the highest voxel's z for the height map, the largest ε_g for the
 //! lifelong map (the most ephemeral voxel in the column shows), the
 //! category's paint priority for changes. Memory is one `f32` per map-area
@@ -84,6 +87,17 @@ pub fn world_box(view: &View) -> WorldBox {
     WorldBox { min_m: [w.x0, w.y0, f64::MIN], max_m: [w.x1, w.y1, f64::MAX] }
 }
 
+/// The x/y centre of the voxel with key `k` on a grid of `voxel_m`.
+pub fn key_centre(k: [i64; 3], voxel_m: f64) -> (f64, f64) {
+    ((k[0] as f64 + 0.5) * voxel_m, (k[1] as f64 + 0.5) * voxel_m)
+}
+
+/// The centre of the grid cell holding a point (change events carry a
+/// centroid, not a key).
+pub fn snap(v: f64, voxel_m: f64) -> f64 {
+    ((v / voxel_m).floor() + 0.5) * voxel_m
+}
+
 /// The `q`-quantile (0..1) of values; `None` if there are none.
 pub fn quantile(values: &mut [f32], q: f64) -> Option<f32> {
     if values.is_empty() {
@@ -105,8 +119,9 @@ pub fn tops(
 ) -> Result<(Raster, u64), StoreError> {
     let mut r = Raster::new(view);
     let side = view.side_px(voxel_m);
-    let n = store::for_each_map_voxel(conn, &world_box(view), eps_g_below, |p, _| {
-        r.splat(view, p[0], p[1], side, p[2] as f32)
+    let n = store::for_each_map_voxel(conn, &world_box(view), eps_g_below, |k, p, _| {
+        let (x, y) = key_centre(k, voxel_m);
+        r.splat(view, x, y, side, p[2] as f32)
     })?;
     Ok((r, n))
 }
@@ -124,7 +139,10 @@ pub fn height_range(r: &Raster) -> Option<(f32, f32)> {
 pub fn max_eps_g(conn: &Connection, view: &View, voxel_m: f64) -> Result<(Raster, u64), StoreError> {
     let mut r = Raster::new(view);
     let side = view.side_px(voxel_m);
-    let n = store::for_each_map_voxel(conn, &world_box(view), None, |p, eps| r.splat(view, p[0], p[1], side, eps))?;
+    let n = store::for_each_map_voxel(conn, &world_box(view), None, |k, _, eps| {
+        let (x, y) = key_centre(k, voxel_m);
+        r.splat(view, x, y, side, eps)
+    })?;
     Ok((r, n))
 }
 
@@ -153,7 +171,7 @@ pub fn changes(events: &[ChangeEventRow], window: &Window, view: &View, voxel_m:
             counts[i] += 1;
             let p = CATEGORY_STYLES[i].priority;
             let side = if p >= STRONG_PRIORITY { side.max(2.0) } else { side };
-            r.splat(view, ev.xyz_m[0], ev.xyz_m[1], side, p as f32);
+            r.splat(view, snap(ev.xyz_m[0], voxel_m), snap(ev.xyz_m[1], voxel_m), side, p as f32);
         }
     }
     (r, counts)
@@ -260,6 +278,13 @@ mod tests {
             }
             assert!(inside > 100, "{m_per_px}: {inside}");
         }
+    }
+
+    #[test]
+    fn voxels_are_drawn_at_their_grid_cells() {
+        assert_eq!(key_centre([0, -1, 7], 0.2), (0.1, -0.1));
+        assert!((snap(0.37, 0.2) - 0.3).abs() < 1e-12);
+        assert!((snap(-0.05, 0.2) + 0.1).abs() < 1e-12);
     }
 
     #[test]

@@ -193,7 +193,7 @@ pub fn draw(conn: &Connection, scene: &Scene, opts: &RenderOptions) -> Result<Pi
 
     // Layout.
     let title_h = z.pad * 0.8 + z.title + z.text * 2.1;
-    let top = title_h + z.small * 1.6;
+    let top = title_h + z.small * 2.4;
     let label_w = [content.x0, content.x1, content.y0, content.y1]
         .iter()
         .map(|v| font::text_width(z.small, &tick_label(v.round())))
