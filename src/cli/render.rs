@@ -29,7 +29,7 @@ pub struct RenderArgs {
     #[arg(long, value_name = "PX", default_value_t = 1600)]
     pub width: u32,
     /// Crop to a world box, metres: x0,y0,x1,y1 (the frame of `seam poses`).
-    #[arg(long, value_name = "x0,y0,x1,y1")]
+    #[arg(long, value_name = "x0,y0,x1,y1", allow_hyphen_values = true)]
     pub bbox: Option<String>,
     /// The PNG to write (its folder must exist).
     #[arg(short, long, value_name = "FILE")]

@@ -1,6 +1,9 @@
-//! The map layers, rastered straight from the store: each voxel centroid is
-//! projected to x/y and splatted as a square of its size (at least one
-//! pixel) into a per-pixel buffer that keeps the **maximum** of a value —
+//! The map layers, rastered straight from the store: each voxel's centre on
+//! the world grid (its key, not the centroid of its points: grid-aligned
+//! squares tile without the moiré of gaps and overlaps that centroids give)
+//! is projected to x/y and splatted as a square of the voxel's size (at
+//! least one pixel) into a per-pixel buffer that keeps the **maximum** of a
+//! value —
 //! the highest voxel's z for the height map, the largest ε_g for the
 //! lifelong map (the most ephemeral voxel in the column shows), the
 //! category's paint priority for changes. Memory is one `f32` per map-area
@@ -28,18 +31,30 @@ impl Raster {
 
     /// Keeps `value` in every pixel of the `side`-pixel square centred on
     /// the world point `(x, y)` where it is larger than what is there.
+    ///
+    /// A pixel is covered when its centre lies in the square, widened by a
+    /// millionth of a pixel: two squares that touch (voxels of a regular
+    /// grid) then share a pixel column at an exact tie instead of leaving a
+    /// one-pixel gap between them, whichever way floating point rounds their
+    /// common edge. A square smaller than a pixel covers the pixel holding
+    /// its centre.
     pub fn splat(&mut self, view: &View, x: f64, y: f64, side: f64, value: f32) {
+        const TIE: f64 = 1e-6;
         let (px, py) = view.to_px(x, y);
         let (px, py) = (px - view.left_px, py - view.top_px);
         let half = side / 2.0;
-        let x0 = (px - half).round() as i64;
-        let y0 = (py - half).round() as i64;
-        let x1 = ((px + half).round() as i64).max(x0 + 1);
-        let y1 = ((py + half).round() as i64).max(y0 + 1);
+        let span = |c: f64| {
+            let (a, b) = ((c - half - 0.5 - TIE).ceil() as i64, (c + half - 0.5 + TIE).ceil() as i64);
+            if b > a { (a, b) } else { (c.floor() as i64, c.floor() as i64 + 1) }
+        };
+        let ((x0, x1), (y0, y1)) = (span(px), span(py));
         let (x0, x1) = (x0.max(0) as usize, x1.min(self.w as i64).max(0) as usize);
         let (y0, y1) = (y0.max(0) as usize, y1.min(self.h as i64).max(0) as usize);
+        if x0 >= x1 {
+            return;
+        }
         for j in y0..y1 {
-            for cell in &mut self.v[j * self.w + x0.min(x1)..j * self.w + x1] {
+            for cell in &mut self.v[j * self.w + x0..j * self.w + x1] {
                 if value > *cell {
                     *cell = value;
                 }
@@ -72,6 +87,17 @@ pub fn world_box(view: &View) -> WorldBox {
     WorldBox { min_m: [w.x0, w.y0, f64::MIN], max_m: [w.x1, w.y1, f64::MAX] }
 }
 
+/// The x/y centre of the voxel with key `k` on a grid of `voxel_m`.
+pub fn key_centre(k: [i64; 3], voxel_m: f64) -> (f64, f64) {
+    ((k[0] as f64 + 0.5) * voxel_m, (k[1] as f64 + 0.5) * voxel_m)
+}
+
+/// The centre of the grid cell holding a point (change events carry a
+/// centroid, not a key).
+pub fn snap(v: f64, voxel_m: f64) -> f64 {
+    ((v / voxel_m).floor() + 0.5) * voxel_m
+}
+
 /// The `q`-quantile (0..1) of values; `None` if there are none.
 pub fn quantile(values: &mut [f32], q: f64) -> Option<f32> {
     if values.is_empty() {
@@ -93,8 +119,9 @@ pub fn tops(
 ) -> Result<(Raster, u64), StoreError> {
     let mut r = Raster::new(view);
     let side = view.side_px(voxel_m);
-    let n = store::for_each_map_voxel(conn, &world_box(view), eps_g_below, |p, _| {
-        r.splat(view, p[0], p[1], side, p[2] as f32)
+    let n = store::for_each_map_voxel(conn, &world_box(view), eps_g_below, |k, p, _| {
+        let (x, y) = key_centre(k, voxel_m);
+        r.splat(view, x, y, side, p[2] as f32)
     })?;
     Ok((r, n))
 }
@@ -112,7 +139,10 @@ pub fn height_range(r: &Raster) -> Option<(f32, f32)> {
 pub fn max_eps_g(conn: &Connection, view: &View, voxel_m: f64) -> Result<(Raster, u64), StoreError> {
     let mut r = Raster::new(view);
     let side = view.side_px(voxel_m);
-    let n = store::for_each_map_voxel(conn, &world_box(view), None, |p, eps| r.splat(view, p[0], p[1], side, eps))?;
+    let n = store::for_each_map_voxel(conn, &world_box(view), None, |k, _, eps| {
+        let (x, y) = key_centre(k, voxel_m);
+        r.splat(view, x, y, side, eps)
+    })?;
     Ok((r, n))
 }
 
@@ -141,7 +171,7 @@ pub fn changes(events: &[ChangeEventRow], window: &Window, view: &View, voxel_m:
             counts[i] += 1;
             let p = CATEGORY_STYLES[i].priority;
             let side = if p >= STRONG_PRIORITY { side.max(2.0) } else { side };
-            r.splat(view, ev.xyz_m[0], ev.xyz_m[1], side, p as f32);
+            r.splat(view, snap(ev.xyz_m[0], voxel_m), snap(ev.xyz_m[1], voxel_m), side, p as f32);
         }
     }
     (r, counts)
@@ -220,6 +250,41 @@ mod tests {
         // A point smaller than a pixel still fills one.
         r.splat(&view, 2.05, 2.05, 0.3, 5.0);
         assert_eq!(at(&r, 20, 79), 5.0);
+    }
+
+    #[test]
+    fn a_regular_grid_of_voxels_leaves_no_gaps_at_any_scale() {
+        // Voxel edges landing exactly on pixel centres (0.04 m per pixel,
+        // 0.2 m voxels: 5 px) used to leave one-pixel gaps.
+        for m_per_px in [0.04, 0.05, 0.0333, 0.0625, 0.1, 0.2, 0.41] {
+            let e = Extent { x0: -1.9, y0: -1.9, x1: -1.9 + 100.0 * m_per_px, y1: -1.9 + 100.0 * m_per_px };
+            let view = View::fit(&e, 0.0, 0.0, 100, 100, 0);
+            let mut r = Raster::new(&view);
+            let side = view.side_px(0.2);
+            for ix in 0..100 {
+                for iy in 0..100 {
+                    r.splat(&view, ix as f64 * 0.2 + 0.1, iy as f64 * 0.2 + 0.1, side, 1.0);
+                }
+            }
+            let mut inside = 0;
+            for j in 0..100 {
+                for i in 0..100 {
+                    let (wx, wy) = view.to_world(i as f64 + 0.5, j as f64 + 0.5);
+                    if (0.01..19.99).contains(&wx) && (0.01..19.99).contains(&wy) {
+                        inside += 1;
+                        assert!(r.v[j * 100 + i].is_finite(), "gap at ({i}, {j}) with {m_per_px} m per pixel");
+                    }
+                }
+            }
+            assert!(inside > 100, "{m_per_px}: {inside}");
+        }
+    }
+
+    #[test]
+    fn voxels_are_drawn_at_their_grid_cells() {
+        assert_eq!(key_centre([0, -1, 7], 0.2), (0.1, -0.1));
+        assert!((snap(0.37, 0.2) - 0.3).abs() < 1e-12);
+        assert!((snap(-0.05, 0.2) + 0.1).abs() < 1e-12);
     }
 
     #[test]

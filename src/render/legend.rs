@@ -50,16 +50,22 @@ pub fn title(c: &mut Canvas, z: &Sizes, x: f32, y: f32, title: &str, subtitle: &
     base2 + z.text * 0.6 - y
 }
 
-/// Grid lines every round number of metres, under the map.
+/// Grid lines every round number of metres, under the map (they show in
+/// its gaps and around it).
 pub fn grid(c: &mut Canvas, view: &View) {
     let w = &view.world;
+    let (l, t, r, b) = (view.left_px as i32, view.top_px as i32, view.right_px() as i32, view.bottom_px() as i32);
     for x in ticks(w.x0, w.x1, 8) {
-        let px = view.to_px(x, 0.0).0.round() as f32 + 0.5;
-        c.polyline(&[(px, view.top_px as f32), (px, view.bottom_px() as f32)], 1.0, Rgb::GRID);
+        let px = view.to_px(x, 0.0).0.floor() as i32;
+        for py in t..b {
+            c.set(px, py, Rgb::GRID);
+        }
     }
     for y in ticks(w.y0, w.y1, 8) {
-        let py = view.to_px(0.0, y).1.round() as f32 + 0.5;
-        c.polyline(&[(view.left_px as f32, py), (view.right_px() as f32, py)], 1.0, Rgb::GRID);
+        let py = view.to_px(0.0, y).1.floor() as i32;
+        for px in l..r {
+            c.set(px, py, Rgb::GRID);
+        }
     }
 }
 
@@ -72,12 +78,12 @@ pub fn axes(c: &mut Canvas, z: &Sizes, view: &View) {
     let w = &view.world;
     let xs = ticks(w.x0, w.x1, 8);
     for &x in &xs {
-        let px = view.to_px(x, 0.0).0.round() as f32 + 0.5;
+        let px = view.to_px(x, 0.0).0.floor() as f32 + 0.5;
         c.polyline(&[(px, b), (px, b + tick)], 1.0, Rgb::MUTED);
         c.text(px, b + tick + z.small * 1.1, z.small, Rgb::MUTED, Align::Centre, &tick_label(x));
     }
     for y in ticks(w.y0, w.y1, 8) {
-        let py = view.to_px(0.0, y).1.round() as f32 + 0.5;
+        let py = view.to_px(0.0, y).1.floor() as f32 + 0.5;
         c.polyline(&[(l - tick, py), (l, py)], 1.0, Rgb::MUTED);
         let cy = py + font::cap_height(z.small) / 2.0;
         c.text(l - tick - 4.0, cy, z.small, Rgb::MUTED, Align::Right, &tick_label(y));
@@ -85,7 +91,7 @@ pub fn axes(c: &mut Canvas, z: &Sizes, view: &View) {
     // Axis names where they cannot collide with tick labels: x past the
     // last tick below the frame's right end, y above the frame's left end.
     c.text(r, b + tick + z.small * 2.4, z.small, Rgb::MUTED, Align::Right, "x (m)");
-    c.text(l - tick - 4.0, t - z.small * 0.5, z.small, Rgb::MUTED, Align::Right, "y (m)");
+    c.text(l - tick - 4.0, t - z.small * 1.1, z.small, Rgb::MUTED, Align::Right, "y (m)");
 }
 
 /// A heading line in the legend; returns the new cursor.

@@ -104,7 +104,11 @@ fn titles(scene: &Scene, what: What, window: &Window, drawn: u64, threshold: f64
     };
     let frame = format!("world frame (seam poses), {}", scene.meta.crs);
     let v = format!("{} m", tick_label(scene.voxel_m));
-    let map_of = format!("map after {}", scene.window_label(&Window { from: all.to, to: all.to }));
+    let map_of = if scene.sessions.is_empty() {
+        "no sessions yet".to_string()
+    } else {
+        format!("map after {}", scene.window_label(&Window { from: all.to, to: all.to }))
+    };
     match what {
         What::Static => (
             format!("{site}: static map, coloured by height"),
@@ -189,7 +193,7 @@ pub fn draw(conn: &Connection, scene: &Scene, opts: &RenderOptions) -> Result<Pi
 
     // Layout.
     let title_h = z.pad * 0.8 + z.title + z.text * 2.1;
-    let top = title_h + z.small * 1.6;
+    let top = title_h + z.small * 2.4;
     let label_w = [content.x0, content.x1, content.y0, content.y1]
         .iter()
         .map(|v| font::text_width(z.small, &tick_label(v.round())))

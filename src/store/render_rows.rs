@@ -1,6 +1,6 @@
 //! Lean reads for pictures (`seam render`, `seam report`): the lifelong
-//! map's extent, and its voxels streamed as position + ε_g without building
-//! a row struct per voxel (a 600k-voxel map is drawn in one pass).
+//! map's extent, and its voxels streamed as key, centroid and ε_g without
+//! building a row struct per voxel (a 600k-voxel map is drawn in one pass).
 
 use super::rows::e;
 use super::{StoreError, WorldBox};
@@ -49,21 +49,22 @@ pub fn map_extent(conn: &Connection) -> Result<Option<MapExtent>, StoreError> {
     }
 }
 
-/// Calls `f(centroid, eps_g)` for every map voxel whose centroid lies in `b`
-/// (and whose ε_g is below `eps_g_below`, if given: the static map), in no
-/// particular order. Returns how many it visited.
+/// Calls `f(key, centroid, eps_g)` for every map voxel whose centroid lies
+/// in `b` (and whose ε_g is below `eps_g_below`, if given: the static map),
+/// in no particular order. The key is on the world grid of `map_state`'s
+/// voxel size. Returns how many it visited.
 pub fn for_each_map_voxel(
     conn: &Connection,
     b: &WorldBox,
     eps_g_below: Option<f64>,
-    mut f: impl FnMut([f64; 3], f32),
+    mut f: impl FnMut([i64; 3], [f64; 3], f32),
 ) -> Result<u64, StoreError> {
     if !has_table(conn, "map_voxels")? {
         return Ok(0);
     }
     let mut st = conn
         .prepare(
-            "SELECT x_m, y_m, z_m, eps_g FROM map_voxels
+            "SELECT x_m, y_m, z_m, eps_g, kx, ky, kz FROM map_voxels
              WHERE x_m BETWEEN ?1 AND ?4 AND y_m BETWEEN ?2 AND ?5 AND z_m BETWEEN ?3 AND ?6 AND eps_g < ?7",
         )
         .map_err(e(conn))?;
@@ -74,7 +75,8 @@ pub fn for_each_map_voxel(
     let mut n = 0;
     while let Some(r) = rows.next().map_err(e(conn))? {
         let p = [r.get(0).map_err(e(conn))?, r.get(1).map_err(e(conn))?, r.get(2).map_err(e(conn))?];
-        f(p, r.get::<_, f64>(3).map_err(e(conn))? as f32);
+        let k = [r.get(4).map_err(e(conn))?, r.get(5).map_err(e(conn))?, r.get(6).map_err(e(conn))?];
+        f(k, p, r.get::<_, f64>(3).map_err(e(conn))? as f32);
         n += 1;
     }
     Ok(n)
