@@ -109,11 +109,11 @@ pub fn places(points_m: &[[f64; 3]], link_m: f64, min_events: usize) -> Places {
 /// (its faces from different spots) is one place. On a simulated 3-session
 /// site, 0.5 m split 18 appeared objects into 113 places, 1.0 m into 60.
 pub const SUMMARY_LINK_M: f64 = 1.0;
-/// Smallest place in a session's summary: 50 voxels (0.4 m³ of 0.2 m
-/// voxels, about one face of a pallet). Smaller groups are mostly a
-/// surface's edge flickering between sessions; with 1.0 m links they gave
-/// 60 appeared places for 18 objects at 10 voxels, 34 at 50.
-pub const SUMMARY_MIN_EVENTS: usize = 50;
+/// Smallest place in a session's summary and the report: 25 voxels (0.2 m³
+/// of 0.2 m voxels, a 1 m × 1 m face). Smaller groups are mostly a surface's
+/// edge flickering between sessions; with 1.0 m links a simulated 3-session
+/// site gave 60 appeared places for 18 objects at 10 voxels, 34 at 50.
+pub const SUMMARY_MIN_EVENTS: usize = 25;
 
 /// What one session changed, in a site manager's terms.
 #[derive(Debug, Clone, serde::Serialize)]

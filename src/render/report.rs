@@ -10,6 +10,7 @@
 use super::frame::tick_label;
 use super::scene::Scene;
 use super::{RenderError, RenderOptions, RenderSummary, What, picture, thousands, write_atomic};
+use crate::change::places::{Place, SUMMARY_LINK_M, SUMMARY_MIN_EVENTS, places};
 use crate::change::{Category, SessionChanges};
 use crate::store::{self, SessionId, Store, StoreError, WorldBox};
 use base64::Engine;
@@ -50,63 +51,6 @@ pub struct ReportSummary {
     /// One per embedded picture, in page order.
     pub pictures: Vec<RenderSummary>,
     pub wall_s: f64,
-}
-
-/// A group of change events close together (8-connected 1 m cells).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Place {
-    pub voxels: u64,
-    pub centre_xy_m: [f64; 2],
-}
-
-/// Edge of the cells change events are grouped in, metres.
-pub const PLACE_CELL_M: f64 = 1.0;
-/// A group needs this many voxels to count as a place (smaller ones are
-/// scattered noise at the map's edges).
-pub const PLACE_MIN_VOXELS: u64 = 10;
-
-/// Groups points into places: points in the same or touching (8-neighbour)
-/// `cell_m` cells belong together; groups under `min_voxels` are dropped.
-/// Largest first.
-pub fn places(points: impl Iterator<Item = [f64; 2]>, cell_m: f64, min_voxels: u64) -> Vec<Place> {
-    let mut cells: FxHashMap<(i64, i64), (u64, [f64; 2])> = FxHashMap::default();
-    for p in points {
-        let key = ((p[0] / cell_m).floor() as i64, (p[1] / cell_m).floor() as i64);
-        let e = cells.entry(key).or_insert((0, [0.0, 0.0]));
-        e.0 += 1;
-        e.1[0] += p[0];
-        e.1[1] += p[1];
-    }
-    let mut seen: FxHashMap<(i64, i64), ()> = FxHashMap::default();
-    let mut keys: Vec<(i64, i64)> = cells.keys().copied().collect();
-    keys.sort_unstable();
-    let mut out = Vec::new();
-    for start in keys {
-        if seen.insert(start, ()).is_some() {
-            continue;
-        }
-        let (mut n, mut sum) = (0u64, [0.0, 0.0]);
-        let mut stack = vec![start];
-        while let Some(k) = stack.pop() {
-            let (c, s) = cells[&k];
-            n += c;
-            sum[0] += s[0];
-            sum[1] += s[1];
-            for dx in -1..=1 {
-                for dy in -1..=1 {
-                    let nb = (k.0 + dx, k.1 + dy);
-                    if cells.contains_key(&nb) && seen.insert(nb, ()).is_none() {
-                        stack.push(nb);
-                    }
-                }
-            }
-        }
-        if n >= min_voxels {
-            out.push(Place { voxels: n, centre_xy_m: [sum[0] / n as f64, sum[1] / n as f64] });
-        }
-    }
-    out.sort_by_key(|p| std::cmp::Reverse(p.voxels));
-    out
 }
 
 /// One row of the sessions table.
@@ -155,17 +99,15 @@ fn read_rows(conn: &rusqlite::Connection, scene: &Scene) -> Result<Vec<Row>, Sto
         } else {
             None
         };
-        let places = places(
-            events
-                .iter()
-                .map(|e| &e.event)
-                .filter(|e| {
-                    e.session_id == id.0 && matches!(e.category, Category::EmergedOverlap | Category::DeletedOverlap)
-                })
-                .map(|e| [e.xyz_m[0], e.xyz_m[1]]),
-            PLACE_CELL_M,
-            PLACE_MIN_VOXELS,
-        );
+        let changed: Vec<[f64; 3]> = events
+            .iter()
+            .map(|e| &e.event)
+            .filter(|e| {
+                e.session_id == id.0 && matches!(e.category, Category::EmergedOverlap | Category::DeletedOverlap)
+            })
+            .map(|e| e.xyz_m)
+            .collect();
+        let places = places(&changed, SUMMARY_LINK_M, SUMMARY_MIN_EVENTS).places;
         rows.push(Row {
             id,
             name: s.name.clone(),
@@ -216,16 +158,18 @@ fn sentence(r: &Row, first: bool, voxel_m: f64) -> String {
         m3(c.deleted_overlap, voxel_m)
     );
     match r.places.len() {
-        0 => s.push_str(", none in a group of 10 or more"),
+        0 => {
+            let _ = write!(s, ", none in a group of {SUMMARY_MIN_EVENTS} or more");
+        }
         n => {
-            let big = r.places[0];
+            let big = &r.places[0];
             let _ = write!(
                 s,
                 ", in {n} place{} (the largest, {} m³, near x = {} m, y = {} m)",
                 if n == 1 { "" } else { "s" },
-                m3(big.voxels as usize, voxel_m),
-                tick_label(big.centre_xy_m[0].round()),
-                tick_label(big.centre_xy_m[1].round())
+                m3(big.events, voxel_m),
+                tick_label(big.centroid_m[0].round()),
+                tick_label(big.centroid_m[1].round())
             );
         }
     }
@@ -469,8 +413,8 @@ fn build(
     }
     let _ = writeln!(
         h,
-        "</ul>\n<p class=\"note\">A place is a group of at least {PLACE_MIN_VOXELS} appeared or removed voxels in touching {} m cells.</p>",
-        tick_label(PLACE_CELL_M)
+        "</ul>\n<p class=\"note\">A place is a group of at least {SUMMARY_MIN_EVENTS} appeared or removed voxels, each within {} m of another.</p>",
+        tick_label(SUMMARY_LINK_M)
     );
 
     // Pictures.
@@ -519,29 +463,6 @@ fn build(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn places_group_touching_cells_and_drop_small_groups() {
-        let mut pts = Vec::new();
-        // A 3 m × 2 m block of 60 points around (10.5, 5) and a diagonal neighbour.
-        for i in 0..60 {
-            pts.push([9.0 + (i % 6) as f64 * 0.5, 4.0 + (i / 6) as f64 * 0.2]);
-        }
-        pts.push([12.2, 6.1]); // touches the block's corner cell diagonally
-        // A far group of 12 and a stray 3.
-        for i in 0..12 {
-            pts.push([-30.0 + i as f64 * 0.05, -30.0]);
-        }
-        for i in 0..3 {
-            pts.push([50.0, 50.0 + i as f64 * 0.1]);
-        }
-        let p = places(pts.into_iter(), 1.0, 10);
-        assert_eq!(p.len(), 2, "{p:?}");
-        assert_eq!(p[0].voxels, 61);
-        assert_eq!(p[1].voxels, 12);
-        assert!((p[1].centre_xy_m[1] + 30.0).abs() < 1e-9);
-        assert!(places(std::iter::empty(), 1.0, 1).is_empty());
-    }
 
     #[test]
     fn text_is_escaped_and_shell_words_quoted() {
