@@ -139,6 +139,15 @@ pub fn run(ctx: &Ctx, a: ExportArgs) -> anyhow::Result<()> {
         trajectory,
         static_threshold: ctx.config.change.static_threshold,
     };
+    if !job.crs.is_complete() {
+        super::output::log(
+            ctx,
+            format!(
+                "note: seam cannot spell out {} as full PROJJSON; the geo metadata names it by id only (see the README)",
+                meta.crs
+            ),
+        );
+    }
     let mut entries = Vec::new();
     for t in &tables {
         entries.push(export_one(&job, &meta.crs, t)?);
