@@ -238,7 +238,8 @@ fn export_one(job: &Job<'_>, crs: &str, table: &str) -> anyhow::Result<catalog::
         "keyframes" => {
             let s = spec(
                 "keyframes",
-                "optimised world pose (t_world_keyframe) of every keyframe on the newest graph version",
+                "optimised world pose (t_world_keyframe) of every keyframe on the newest graph version; \
+                 an unaligned session's poses are in its own frame (sessions.alignment_success = false)",
                 keyframes_schema(),
                 by_session,
                 Some("keyframe_index (trajectory order: consecutive rows are metres apart)"),
