@@ -10,7 +10,9 @@
 //! `CI` is set (`.ci/run` installs them: there it must really run).
 
 mod common;
+use arrow_array::{Array, BinaryArray, BooleanArray, Float64Array, Int32Array, Int64Array};
 use common::*;
+use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
 use seam::geometry::Pose;
 use seam::store::{KeyframeId, LoopRow, SessionId, Store, StoreError, insert_loops};
 use std::path::Path;
@@ -126,10 +128,67 @@ fn analysts_readers_open_every_export() {
     assert!(o.status.success(), "{}", stderr(&o));
     assert_same_state(&before, &store_state(&root), "after an export (read-only)");
 
+    check_loop_edges(&out);
     let expect = expected_counts(&root);
     assert_eq!(expect["tables"]["loop_edges"], 3);
     assert!(expect["tables"]["map_voxels"].as_i64().unwrap() > 100_000, "enough rows for several row groups");
     let expect_path = tmp.path().join("expect.json");
     std::fs::write(&expect_path, expect.to_string()).unwrap();
     run_client_check(&out, Some(&expect_path));
+}
+
+/// The three stored candidates, read back on the Rust side: partitioned by
+/// the evaluating session, ρ null where infinite, each a LineString Z from
+/// the source keyframe's exported position to the target's.
+fn check_loop_edges(out: &Path) {
+    let read = |p: &Path| {
+        let b = ParquetRecordBatchReaderBuilder::try_new(std::fs::File::open(p).unwrap()).unwrap();
+        b.build().unwrap().map(|b| b.unwrap()).collect::<Vec<_>>()
+    };
+    assert!(read(&out.join("loop_edges/session=1/part-0.parquet")).iter().all(|b| b.num_rows() == 0));
+    let batches = read(&out.join("loop_edges/session=2/part-0.parquet"));
+    assert_eq!(batches.len(), 1);
+    let b = &batches[0];
+    assert_eq!(b.num_rows(), 3);
+    let col = |n: &str| b.column_by_name(n).unwrap_or_else(|| panic!("no column {n}")).clone();
+    let ids = col("candidate_id");
+    let ids = ids.as_any().downcast_ref::<Int64Array>().unwrap();
+    let mut sorted = ids.values().to_vec();
+    sorted.sort();
+    assert_eq!(sorted, [1, 2, 3]);
+    let accepted = col("accepted");
+    let accepted = accepted.as_any().downcast_ref::<BooleanArray>().unwrap();
+    let rho = col("rho_scan");
+    let rho = rho.as_any().downcast_ref::<Float64Array>().unwrap();
+    let wkb = col("geometry");
+    let wkb = wkb.as_any().downcast_ref::<BinaryArray>().unwrap();
+    let length = col("length_m");
+    let length = length.as_any().downcast_ref::<Float64Array>().unwrap();
+    let (src_kf, tgt_kf) = (col("source_keyframe"), col("target_keyframe"));
+    let (src_kf, tgt_kf) =
+        (src_kf.as_any().downcast_ref::<Int32Array>().unwrap(), tgt_kf.as_any().downcast_ref::<Int32Array>().unwrap());
+    let (src_s, tgt_s) = (col("source_session"), col("target_session"));
+    let (src_s, tgt_s) =
+        (src_s.as_any().downcast_ref::<Int64Array>().unwrap(), tgt_s.as_any().downcast_ref::<Int64Array>().unwrap());
+    // Keyframe positions as exported.
+    let position = |s: i64, k: i32| -> [f64; 3] {
+        let kb = &read(&out.join(format!("keyframes/session={s}/part-0.parquet")))[0];
+        let idx = kb.column_by_name("keyframe_index").unwrap().as_any().downcast_ref::<Int32Array>().unwrap().clone();
+        let r = (0..kb.num_rows()).find(|&r| idx.value(r) == k).unwrap();
+        ["x_m", "y_m", "z_m"]
+            .map(|c| kb.column_by_name(c).unwrap().as_any().downcast_ref::<Float64Array>().unwrap().value(r))
+    };
+    for r in 0..3 {
+        let id = ids.value(r);
+        assert_eq!(accepted.value(r), id == 1, "candidate {id}");
+        assert_eq!(rho.is_null(r), id == 2, "candidate {id}: infinite rho is null");
+        let w = wkb.value(r);
+        assert_eq!(&w[..9], &[1, 0xea, 0x03, 0, 0, 2, 0, 0, 0], "LineString Z of two vertices");
+        let a = position(src_s.value(r), src_kf.value(r));
+        let b = position(tgt_s.value(r), tgt_kf.value(r));
+        let got: Vec<f64> = w[9..].chunks(8).map(|c| f64::from_le_bytes(c.try_into().unwrap())).collect();
+        assert_eq!(got, [a, b].concat(), "candidate {id}");
+        let d = (0..3).map(|i| (a[i] - b[i]).powi(2)).sum::<f64>().sqrt();
+        assert!((length.value(r) - d).abs() < 1e-9);
+    }
 }

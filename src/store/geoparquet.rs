@@ -199,6 +199,16 @@ impl Crs {
     }
 }
 
+impl std::fmt::Display for Crs {
+    /// As the store's meta says it: `local` or `EPSG:<code>`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Crs::Local { .. } => f.write_str("local"),
+            Crs::Epsg(code) => write!(f, "EPSG:{code}"),
+        }
+    }
+}
+
 /// The complete PROJJSON of WGS 84 / UTM zone `zone` (EPSG 326zz / 327zz).
 fn utm_projjson(code: u32, zone: u32, north: bool) -> Value {
     let h = if north { "N" } else { "S" };
@@ -487,6 +497,7 @@ mod tests {
     fn crs_from_meta_and_its_encodings() {
         assert_eq!(Crs::from_meta("EPSG:32652", "x"), Crs::Epsg(32652));
         assert_eq!(Crs::from_meta("local", "x"), Crs::Local { site: "x".into() });
+        assert_eq!(Crs::from_meta("epsg:32652", "x").to_string(), "EPSG:32652");
         assert!(Crs::Epsg(32733).is_complete());
         let south = Crs::Epsg(32733).projjson();
         assert_eq!(south["conversion"]["parameters"][4]["value"], 10_000_000.0);

@@ -139,6 +139,15 @@ pub fn run(ctx: &Ctx, a: ExportArgs) -> anyhow::Result<()> {
         trajectory,
         static_threshold: ctx.config.change.static_threshold,
     };
+    if !job.crs.is_complete() {
+        super::output::log(
+            ctx,
+            format!(
+                "note: seam cannot spell out {} as full PROJJSON; the geo metadata names it by id only (see the README)",
+                meta.crs
+            ),
+        );
+    }
     let mut entries = Vec::new();
     for t in &tables {
         entries.push(export_one(&job, &meta.crs, t)?);
@@ -229,7 +238,8 @@ fn export_one(job: &Job<'_>, crs: &str, table: &str) -> anyhow::Result<catalog::
         "keyframes" => {
             let s = spec(
                 "keyframes",
-                "optimised world pose (t_world_keyframe) of every keyframe on the newest graph version",
+                "optimised world pose (t_world_keyframe) of every keyframe on the newest graph version; \
+                 an unaligned session's poses are in its own frame (sessions.alignment_success = false)",
                 keyframes_schema(),
                 by_session,
                 Some("keyframe_index (trajectory order: consecutive rows are metres apart)"),
