@@ -138,7 +138,7 @@ pub const CATEGORY_STYLES: [CategoryStyle; 5] = [
     CategoryStyle {
         category: Category::EmergedOverlap,
         label: "built / appeared",
-        note: "where earlier sessions saw free space",
+        note: "next to structure seen before",
         colour: Rgb([0, 158, 115]),
         priority: 5,
     },

@@ -404,7 +404,7 @@ fn build(
             id = r.id.0,
         );
     }
-    h.push_str("</table>\n</div>\n<p class=\"note\">Loops: accepted / tried, inter (to earlier sessions) · intra (within the session). Removed as dynamic: points the evidence step took out as moving. Appeared: voxels where earlier sessions saw free space; removed: voxels this session saw free; first seen: voxels in areas no earlier session surveyed; m³ counts whole voxels. Map voxels: the lifelong map after the session, and how many of them are static.</p>\n");
+    h.push_str("</table>\n</div>\n<p class=\"note\">Loops: accepted / tried, inter (to earlier sessions) · intra (within the session). Removed as dynamic: points the evidence step took out as moving. Appeared: new voxels within τ_o ([change] tau_o_m, 2 m by default) of structure an earlier session also saw; removed: voxels this session saw free; first seen: voxels in areas no earlier session surveyed; m³ counts whole voxels. Map voxels: the lifelong map after the session, and how many of them are static.</p>\n");
 
     // What changed.
     h.push_str("<h2>What changed</h2>\n<ul class=\"changes\">\n");
