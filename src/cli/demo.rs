@@ -22,7 +22,7 @@ pub struct DemoArgs {
 }
 
 pub fn run(ctx: &Ctx, a: DemoArgs) -> anyhow::Result<()> {
-    let cfg = a.site.to_config()?;
+    let cfg = a.site.to_config(super::simulate::DEMO_KEYFRAMES)?;
     if a.out.exists() {
         if !a.out.join(MARKER).exists() {
             return Err(UsageError(format!(

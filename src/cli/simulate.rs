@@ -27,13 +27,24 @@ pub struct SiteArgs {
     /// Random seed; the same seed gives the same files.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Keyframes per session (about one per metre walked).
-    #[arg(long, default_value_t = 300)]
-    pub keyframes: usize,
+    /// Keyframes per session, about one per metre walked [default: 300 for
+    /// `seam simulate`, 150 for `seam demo`].
+    #[arg(long)]
+    pub keyframes: Option<usize>,
 }
 
+/// `seam simulate`'s sessions: 300 keyframes, the size of the paper's
+/// construction-site runs.
+pub const SIMULATE_KEYFRAMES: usize = 300;
+/// `seam demo`'s sessions: 150 keyframes, so that the whole demo (five
+/// sessions aligned, cleaned and compared, queries, report) takes a few
+/// minutes on two cores.
+pub const DEMO_KEYFRAMES: usize = 150;
+
 impl SiteArgs {
-    pub fn to_config(&self) -> anyhow::Result<SimConfig> {
+    /// The simulator's settings; `default_keyframes` when `--keyframes` is not given.
+    pub fn to_config(&self, default_keyframes: usize) -> anyhow::Result<SimConfig> {
+        let keyframes = self.keyframes.unwrap_or(default_keyframes);
         let sensor = SensorModel::parse(&self.sensor).ok_or_else(|| {
             let names: Vec<&str> = SensorModel::ALL.iter().map(|m| m.name()).collect();
             UsageError(format!(
@@ -42,14 +53,14 @@ impl SiteArgs {
                 names.join(", ")
             ))
         })?;
-        if self.sessions == 0 || self.keyframes < 2 {
+        if self.sessions == 0 || keyframes < 2 {
             return Err(UsageError("--sessions must be ≥ 1 and --keyframes ≥ 2".into()).into());
         }
         Ok(SimConfig {
             sessions: self.sessions,
             sensor,
             seed: self.seed,
-            keyframes_per_session: self.keyframes,
+            keyframes_per_session: keyframes,
             ..SimConfig::default()
         })
     }
@@ -78,7 +89,7 @@ pub fn simulate_site(ctx: &Ctx, out: &Path, cfg: &SimConfig) -> anyhow::Result<S
 }
 
 pub fn run(ctx: &Ctx, a: SimulateArgs) -> anyhow::Result<()> {
-    let cfg = a.site.to_config()?;
+    let cfg = a.site.to_config(SIMULATE_KEYFRAMES)?;
     let t0 = std::time::Instant::now();
     let summary = simulate_site(ctx, &a.out, &cfg)?;
     if json(ctx) {
