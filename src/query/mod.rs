@@ -31,7 +31,8 @@
 //!
 //! Keywords are case-insensitive; `in` is optional noise; `#` starts a
 //! comment. `class:` is the change category (`emerged` and `deleted` mean
-//! both kinds of each), `eps:` is ε_g (after the change, for `changes`). A
+//! both kinds of each), `eps:` is ε_g (after the change, for `changes`;
+//! compared at the `f32` precision it is stored in). A
 //! name `sN` that is no session's name means session number N. What each
 //! subject returns is in [`subjects`]; what time means for each in [`plan`].
 //!

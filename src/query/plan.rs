@@ -451,6 +451,7 @@ fn resolve_filter(f: &ast::Filter, subject: Subject, sp: &Spec) -> Result<Resolv
                     Lit::Number(v) if col.ty == Ty::Int && v.fract() == 0.0 && v.abs() < 9.0e15 => {
                         values.push(Value::Integer(*v as i64))
                     }
+                    Lit::Number(v) if col.f32 => values.push(Value::Real(*v as f32 as f64)),
                     Lit::Number(v) => values.push(Value::Real(*v)),
                     Lit::Text(t) => {
                         return Err(QueryError::new(l.span, format!("`{}` is a number, not `{t}`", col.name))

@@ -122,7 +122,10 @@ fn window(expr: &str, w: &Window) -> Sql {
         q.push("0");
         return q;
     };
-    if ids.len() as i64 == last - first + 1 {
+    if first == last {
+        // One session: an equality lets an index use the next column too.
+        q.push(&format!("{expr} = ")).param(*first);
+    } else if ids.len() as i64 == last - first + 1 {
         q.push(&format!("{expr} BETWEEN ")).param(*first).push(" AND ").param(*last);
     } else {
         q.push(&format!("{expr} IN ("));
