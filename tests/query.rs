@@ -429,6 +429,14 @@ fn pipeline_stages_count_top_sort_fields_limit_sum() {
     assert_eq!(ints(&r, "change_events"), [truth_events().len() as i64]);
     let r = ok("changes | count by session | sum");
     assert_eq!(ints(&r, "count"), [truth_events().len() as i64]);
+
+    // Counting counts: the new column takes another name.
+    let r = ok("changes in zone:\"Tower B\" | count by session | count by count");
+    assert_eq!(names(&r), ["count", "rows"]);
+    assert_eq!(ints(&r, "rows").iter().sum::<i64>(), 4, "four sessions");
+    // The deepest pipeline there may be runs.
+    let r = ok(&format!("changes{}", " | sort x_m desc | limit 50".repeat(16)));
+    assert_eq!(r.rows.len(), 50);
 }
 
 #[test]
