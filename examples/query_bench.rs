@@ -84,7 +84,7 @@ fn events_of(
                 voxel_id: rng.random_range(0..5_000_000),
                 xyz_m: p.map(snap),
                 category,
-                eps_g_before: (k % 3 != 0).then(|| rng.random_range(0.1..0.9)),
+                eps_g_before: (!k.is_multiple_of(3)).then(|| rng.random_range(0.1..0.9)),
                 eps_g_after: rng.random_range(0.1..0.9),
             }
         })

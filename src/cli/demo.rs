@@ -182,7 +182,7 @@ fn ask_questions(ctx: &Ctx, store_path: &std::path::Path, summaries: &[SessionSu
             color: false,
         })?;
         let result = crate::query::execute(store.conn(), &plan)?;
-        super::query::print_result_table(ctx, &result);
+        super::query::print_result_table(ctx, &result)?;
     }
     Ok(())
 }

@@ -7,12 +7,12 @@
 //! and never with `NO_COLOR`. `QUERY` may be `@FILE` to read it from a file
 //! (such as `queries/*.seamql`).
 
-use super::output::{json, log, print_json, print_table};
+use super::output::{json, log, print_json};
 use super::{Ctx, Format, UsageError};
 use crate::query::{self, Catalog, QueryResult, Report};
 use crate::store::{Store, StoreError, evidence_files::write_batch};
 use clap::Args;
-use std::io::IsTerminal;
+use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
 
 #[derive(Debug, Args)]
@@ -73,23 +73,62 @@ pub fn run(ctx: &Ctx, a: QueryArgs) -> anyhow::Result<()> {
         println!("{} rows written to {}", written.row_count, out.display());
         return Ok(());
     }
-    match ctx.format {
-        Format::Json => print_json(&query::exec::JsonRows(&result))?,
-        Format::Csv => print!("{}", csv(&result)),
-        _ => print_result_table(ctx, &result),
-    }
-    Ok(())
-}
-
-/// The rows as aligned columns (reals to 3 decimals, NULL as `-`).
-pub(super) fn print_result_table(ctx: &Ctx, result: &QueryResult) {
-    let header: Vec<&str> = result.columns.iter().map(|c| c.name.as_str()).collect();
-    let rows: Vec<Vec<String>> =
-        (0..result.rows.len()).map(|r| (0..header.len()).map(|c| result.cell(r, c, Some(3), "-")).collect()).collect();
-    print_table(&header, &rows);
-    if rows.is_empty() {
+    if result.rows.is_empty() {
         log(ctx, "(no rows)");
     }
+    let text = match ctx.format {
+        Format::Json => serde_json::to_string_pretty(&query::exec::JsonRows(&result))? + "\n",
+        Format::Csv => csv(&result),
+        _ => table(&result),
+    };
+    emit(&text)
+}
+
+/// Writes to stdout; a reader that stopped reading (`seam query ... | head`)
+/// is not an error.
+fn emit(text: &str) -> anyhow::Result<()> {
+    let mut out = std::io::stdout().lock();
+    match out.write_all(text.as_bytes()).and_then(|_| out.flush()) {
+        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => Err(e.into()),
+        _ => Ok(()),
+    }
+}
+
+/// Aligned columns with a header, numbers right-aligned, reals to 3
+/// decimals, NULL as `-` (the layout of every seam table).
+fn table(r: &QueryResult) -> String {
+    let header: Vec<String> = r.columns.iter().map(|c| c.name.clone()).collect();
+    let rows: Vec<Vec<String>> =
+        (0..r.rows.len()).map(|i| (0..header.len()).map(|c| r.cell(i, c, Some(3), "-")).collect()).collect();
+    let width = |c: usize| rows.iter().map(|row| row[c].chars().count()).chain([header[c].len()]).max().unwrap_or(0);
+    let widths: Vec<usize> = (0..header.len()).map(width).collect();
+    let numeric: Vec<bool> = (0..header.len())
+        .map(|c| !rows.is_empty() && rows.iter().all(|row| row[c].parse::<f64>().is_ok() || row[c] == "-"))
+        .collect();
+    let line = |cells: &[String]| {
+        let parts: Vec<String> = cells
+            .iter()
+            .enumerate()
+            .map(|(c, s)| {
+                let w = widths[c];
+                if numeric[c] { format!("{s:>w$}") } else { format!("{s:<w$}") }
+            })
+            .collect();
+        parts.join("  ").trim_end().to_string() + "\n"
+    };
+    let mut out = line(&header);
+    for row in &rows {
+        out.push_str(&line(row));
+    }
+    out
+}
+
+/// The rows as aligned columns on stdout (for `seam demo`'s questions).
+pub(super) fn print_result_table(ctx: &Ctx, result: &QueryResult) -> anyhow::Result<()> {
+    if result.rows.is_empty() {
+        log(ctx, "(no rows)");
+    }
+    emit(&table(result))
 }
 
 /// Comma-separated with a header; reals exact; fields with `,`, `"` or a

@@ -31,7 +31,8 @@
 //!
 //! Keywords are case-insensitive; `in` is optional noise; `#` starts a
 //! comment. `class:` is the change category (`emerged` and `deleted` mean
-//! both kinds of each), `eps:` is ε_g (after the change, for `changes`). A
+//! both kinds of each), `eps:` is ε_g (after the change, for `changes`;
+//! compared at the `f32` precision it is stored in). A
 //! name `sN` that is no session's name means session number N. What each
 //! subject returns is in [`subjects`]; what time means for each in [`plan`].
 //!
@@ -39,7 +40,7 @@
 //!
 //! [`lexer`] (tokens with byte spans) → [`parser`] (→ [`ast`]) → [`plan`]
 //! (names resolved against the store's [`catalog`]; did-you-mean on every
-//! unknown name) → [`sql`] (one statement, `?` placeholders, values as
+//! unknown name; [`stages`] for the pipeline) → [`sql`] (one statement, `?` placeholders, values as
 //! parameters, never spliced) → [`exec`] (run on a read-only connection,
 //! polygons tested in Rust through `seam_in_polygon`). Errors are
 //! [`QueryError`]s with a span, rendered like rustc's ([`error`]).
@@ -55,6 +56,7 @@ pub mod lexer;
 pub mod parser;
 pub mod plan;
 pub mod sql;
+pub mod stages;
 pub mod subjects;
 
 pub use catalog::{Catalog, SessionInfo};

@@ -25,6 +25,11 @@ struct Parser {
 
 /// Largest whole number a count or limit may be (exact in an f64).
 const MAX_WHOLE: f64 = 9_007_199_254_740_992.0;
+/// Each stage nests the statement one level deeper; SQLite's parser has a
+/// depth limit far above this, and no question needs more.
+const MAX_STAGES: usize = 32;
+/// Values in one `a,b,c` list (each is one SQL parameter).
+const MAX_LIST: usize = 1000;
 
 impl Parser {
     fn peek(&self) -> &Token {
@@ -92,6 +97,10 @@ impl Parser {
         }
         while self.eat(&Tok::Pipe).is_some() {
             let stage = self.stage()?;
+            if q.stages.len() == MAX_STAGES {
+                return Err(QueryError::new(stage.span, format!("more than {MAX_STAGES} pipeline stages"))
+                    .label("one too many"));
+            }
             q.stages.push(stage);
             match self.peek().tok {
                 Tok::Eof | Tok::Pipe => {}
@@ -206,7 +215,12 @@ impl Parser {
             "session" | "sessions" => {
                 let mut refs = vec![self.session_ref()?];
                 while self.eat(&Tok::Comma).is_some() {
-                    refs.push(self.session_ref()?);
+                    let r = self.session_ref()?;
+                    if refs.len() == MAX_LIST {
+                        return Err(QueryError::new(r.span, format!("a list holds at most {MAX_LIST} sessions"))
+                            .label("one too many"));
+                    }
+                    refs.push(r);
                 }
                 let span = start.to(refs.last().map_or(start, |r| r.span));
                 q.time.push(Spanned::new(Time::Sessions(refs), span));
@@ -318,7 +332,13 @@ impl Parser {
         }
         let mut all = vec![first];
         while self.eat(&Tok::Comma).is_some() {
-            all.push(self.lit()?);
+            let l = self.lit()?;
+            if all.len() == MAX_LIST {
+                return Err(
+                    QueryError::new(l.span, format!("a list holds at most {MAX_LIST} values")).label("one too many")
+                );
+            }
+            all.push(l);
         }
         Ok(Cond::AnyOf(all))
     }
@@ -335,7 +355,13 @@ impl Parser {
     fn fields(&mut self) -> Result<Vec<Spanned<String>>, QueryError> {
         let mut out = vec![self.field()?];
         while self.eat(&Tok::Comma).is_some() {
-            out.push(self.field()?);
+            let f = self.field()?;
+            if out.len() == MAX_LIST {
+                return Err(
+                    QueryError::new(f.span, format!("a list holds at most {MAX_LIST} fields")).label("one too many")
+                );
+            }
+            out.push(f);
         }
         Ok(out)
     }
@@ -511,6 +537,12 @@ mod tests {
         let s = "changes bbox:0,0,0,1,1,1 zone:a";
         assert_eq!(at(s, &err(s)), "zone:a");
         assert!(err("").message.contains("empty"));
+        // Limits that keep the SQL within SQLite's: stages and list lengths.
+        let s = format!("changes{}", " | limit 1".repeat(33));
+        assert_eq!(at(&s, &err(&s)), "limit 1");
+        let s = format!("changes class:{}", vec!["coexist"; 1001].join(","));
+        assert!(err(&s).message.contains("at most 1000"));
+        assert!(parse(&format!("changes{}", " | limit 1".repeat(32))).is_ok());
         assert!(err("changes count").help.unwrap().contains("| count"));
     }
 }

@@ -18,7 +18,8 @@
 //! ```
 
 use super::ast::Subject;
-use super::plan::{Area, FilterOp, Plan, ResolvedFilter, ResolvedStage, Window};
+use super::plan::{Area, FilterOp, Plan, ResolvedFilter, Window};
+use super::stages::ResolvedStage;
 use super::subjects::{Col, spec};
 use rusqlite::types::Value;
 
@@ -122,7 +123,10 @@ fn window(expr: &str, w: &Window) -> Sql {
         q.push("0");
         return q;
     };
-    if ids.len() as i64 == last - first + 1 {
+    if first == last {
+        // One session: an equality lets an index use the next column too.
+        q.push(&format!("{expr} = ")).param(*first);
+    } else if ids.len() as i64 == last - first + 1 {
         q.push(&format!("{expr} BETWEEN ")).param(*first).push(" AND ").param(*last);
     } else {
         q.push(&format!("{expr} IN ("));
@@ -322,10 +326,10 @@ pub fn compile(p: &Plan) -> Sql {
     let mut visible: Vec<String> = sp.columns.iter().map(|c| c.name.to_string()).collect();
     for st in &p.stages {
         match st {
-            ResolvedStage::Count { by } => {
+            ResolvedStage::Count { by, name } => {
                 let keys: Vec<String> = by.iter().map(|n| ident(n)).collect();
                 let mut fields = keys.clone();
-                fields.push("count(*) AS \"count\"".into());
+                fields.push(format!("count(*) AS {}", ident(name)));
                 q = q.wrap(&fields.join(", "), |w| {
                     if !keys.is_empty() {
                         w.push(&format!(" GROUP BY {}", keys.join(", ")));
@@ -333,7 +337,7 @@ pub fn compile(p: &Plan) -> Sql {
                 });
                 order = by.iter().map(|n| (n.clone(), false)).collect();
                 visible = by.clone();
-                visible.push("count".into());
+                visible.push(name.clone());
             }
             ResolvedStage::Order(o) => order = o.clone(),
             ResolvedStage::Limit(n) => {

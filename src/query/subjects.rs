@@ -36,14 +36,21 @@ pub struct Col {
     pub ty: Ty,
     /// Adding it up over rows means something (`| sum`).
     pub additive: bool,
+    /// Stored from an `f32` (ε): a value typed in a filter is rounded to
+    /// `f32` too, so `eps:>=0.7` matches a stored 0.7.
+    pub f32: bool,
 }
 
 const fn col(name: &'static str, expr: &'static str, ty: Ty) -> Col {
-    Col { name, expr, ty, additive: false }
+    Col { name, expr, ty, additive: false, f32: false }
 }
 
 const fn sum(name: &'static str, expr: &'static str, ty: Ty) -> Col {
-    Col { name, expr, ty, additive: true }
+    Col { name, expr, ty, additive: true, f32: false }
+}
+
+const fn eps(name: &'static str, expr: &'static str) -> Col {
+    Col { name, expr, ty: Ty::Real, additive: false, f32: true }
 }
 
 /// A session's day: its `session.toml` date, else the day it was ingested.
@@ -57,8 +64,8 @@ pub const CHANGES: &[Col] = &[
     col("x_m", "e.x_m", Ty::Real),
     col("y_m", "e.y_m", Ty::Real),
     col("z_m", "e.z_m", Ty::Real),
-    col("eps_g_before", "e.eps_g_before", Ty::Real),
-    col("eps_g_after", "e.eps_g_after", Ty::Real),
+    eps("eps_g_before", "e.eps_g_before"),
+    eps("eps_g_after", "e.eps_g_after"),
     col("voxel_id", "e.voxel_id", Ty::Int),
 ];
 
@@ -67,8 +74,8 @@ pub const MAP: &[Col] = &[
     col("x_m", "v.x_m", Ty::Real),
     col("y_m", "v.y_m", Ty::Real),
     col("z_m", "v.z_m", Ty::Real),
-    col("eps_g", "v.eps_g", Ty::Real),
-    col("eps_l", "v.eps_l", Ty::Real),
+    eps("eps_g", "v.eps_g"),
+    eps("eps_l", "v.eps_l"),
     col("points", "v.points", Ty::Int),
     col("category", "v.category", Ty::Category),
     col("first_session", "v.first_session", Ty::Int),
