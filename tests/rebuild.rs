@@ -86,7 +86,16 @@ fn assert_refused(a: &Path, out: &Path, extra: &[&str], code: i32, fragments: &[
 fn rebuild_of_small_sessions_equals_the_store_and_keeps_names_and_options() {
     let tmp = tempfile::tempdir().unwrap();
     let (a, _, _) = small_site(tmp.path());
+    // Zones are the user's: a rebuild keeps them (the state comparison below covers the zones table).
+    for args in [
+        vec!["zones", "add", s(&a), "Tower B", "bbox:0,0,0,10,10,5"],
+        vec!["zones", "add", s(&a), "yard", "--wkt", "POLYGON((0 0, 8 0, 8 6, 0 0))", "--z", "-1..4"],
+    ] {
+        let o = run(&args);
+        assert!(o.status.success(), "{args:?}: {}", stderr(&o));
+    }
     let before = store_state(&a);
+    assert!(before.0.contains("## zones (2 rows)"), "{}", before.0);
     let b = tmp.path().join("b.seam");
     let r = json_of(&["rebuild", s(&a), "--out", s(&b)]);
 

@@ -82,6 +82,9 @@ pub struct RebuildPlan {
     pub source: PathBuf,
     pub init: InitOptions,
     pub sessions: Vec<PlannedSession>,
+    /// The source's named zones (`seam zones`), copied into the new store
+    /// before its first ingest: they are the user's, not computed.
+    pub zones: Vec<crate::store::Zone>,
     /// Time spent checking the source folders, s.
     pub verify_s: f64,
 }
@@ -290,7 +293,8 @@ pub fn plan(source: &mut Store, opts: &RebuildOptions, config: &Config) -> Resul
             options,
         });
     }
-    Ok(RebuildPlan { source: root, init, sessions, verify_s: t0.elapsed().as_secs_f64() })
+    let zones = crate::store::zones(source.conn())?;
+    Ok(RebuildPlan { source: root, init, sessions, zones, verify_s: t0.elapsed().as_secs_f64() })
 }
 
 /// Creates `out` and ingests every planned session into it, in order.
@@ -306,6 +310,7 @@ pub fn execute(
 ) -> Result<RebuildReport, RebuildError> {
     let t0 = Instant::now();
     let mut store = Store::create(out, &plan.init)?;
+    store.transaction(|tx| plan.zones.iter().try_for_each(|z| crate::store::insert_zone(tx, &z.name, &z.shape)))?;
     let mut sessions = Vec::with_capacity(plan.sessions.len());
     for (i, p) in plan.sessions.iter().enumerate() {
         on_session(i, p);
