@@ -553,27 +553,10 @@ fn unknown_map_table_names_every_known_table() {
 #[cfg_attr(debug_assertions, ignore = "release only: cargo test --release")]
 fn ingested_site_exports_what_the_store_holds() {
     let tmp = tempfile::tempdir().unwrap();
-    let sim = tmp.path().join("sim");
-    let o = run(&[
-        "simulate",
-        sim.to_str().unwrap(),
-        "--sessions",
-        "2",
-        "--keyframes",
-        "8",
-        "--seed",
-        "7",
-        "--format",
-        "json",
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let summary: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    let summary = simulate(&tmp.path().join("sim"), 2, 8, 7, &[]);
     let root = tmp.path().join("site.seam");
     init_store(&root);
-    for s in summary["sessions"].as_array().unwrap() {
-        let o = run(&["ingest", root.to_str().unwrap(), s["dir"].as_str().unwrap(), "--quiet"]);
-        assert!(o.status.success(), "{}", stderr(&o));
-    }
+    ingest_all(&root, &summary);
     let out = tmp.path().join("out");
     let tables = "point_labels,static_map,lifelong_map,changes,sessions,keyframes,loop_edges";
     let o = run(&["export", root.to_str().unwrap(), out.to_str().unwrap(), "--tables", tables, "--quiet"]);

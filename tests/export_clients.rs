@@ -20,28 +20,11 @@ use std::path::Path;
 /// Simulates and ingests two sessions of 30 keyframes (a few seconds in a
 /// release build).
 fn ingested_store(tmp: &Path) -> std::path::PathBuf {
-    let sim = tmp.join("sim");
-    let o = run(&[
-        "simulate",
-        sim.to_str().unwrap(),
-        "--sessions",
-        "2",
-        "--keyframes",
-        "30",
-        "--seed",
-        "7",
-        "--format",
-        "json",
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let summary: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    let summary = simulate(&tmp.join("sim"), 2, 30, 7, &[]);
     let root = tmp.join("site.seam");
     let o = run(&["init", root.to_str().unwrap(), "--crs", "EPSG:32652"]);
     assert!(o.status.success(), "{}", stderr(&o));
-    for s in summary["sessions"].as_array().unwrap() {
-        let o = run(&["ingest", root.to_str().unwrap(), s["dir"].as_str().unwrap(), "--quiet"]);
-        assert!(o.status.success(), "{}", stderr(&o));
-    }
+    ingest_all(&root, &summary);
     root
 }
 

@@ -5,7 +5,6 @@
 
 mod common;
 use common::*;
-use std::path::Path;
 
 fn json_of(args: &[&str]) -> serde_json::Value {
     let o = run(args);
@@ -13,28 +12,12 @@ fn json_of(args: &[&str]) -> serde_json::Value {
     serde_json::from_str(&stdout(&o)).unwrap_or_else(|e| panic!("seam {args:?}: {e}\n{}", stdout(&o)))
 }
 
-fn simulate(out: &Path, sessions: usize, keyframes: usize, seed: u64) -> serde_json::Value {
-    let (s, k, seed) = (sessions.to_string(), keyframes.to_string(), seed.to_string());
-    json_of(&[
-        "simulate",
-        out.to_str().unwrap(),
-        "--sessions",
-        &s,
-        "--keyframes",
-        &k,
-        "--seed",
-        &seed,
-        "--format",
-        "json",
-    ])
-}
-
 #[test]
 #[cfg_attr(debug_assertions, ignore = "release only: cargo test --release")]
 fn sessions_are_aligned_jointly_within_a_decimetre() {
     let tmp = tempfile::tempdir().unwrap();
     let sim = tmp.path().join("sim");
-    let summary = simulate(&sim, 4, 150, 21);
+    let summary = simulate(&sim, 4, 150, 21, &[]);
     let store = tmp.path().join("site.seam");
     init_store(&store);
     let st = store.to_str().unwrap();
@@ -112,7 +95,7 @@ fn unrelated_session_is_left_unaligned_and_initial_guess_places_it() {
         return;
     };
     let sim = tmp.path().join("sim");
-    simulate(&sim, 2, 150, 21);
+    simulate(&sim, 2, 150, 21, &[]);
     let store = tmp.path().join("site.seam");
     init_store(&store);
     let st = store.to_str().unwrap();

@@ -8,23 +8,7 @@ use common::*;
 fn simulate_then_ingest_every_session_for_each_sensor() {
     for sensor in ["os1-64", "vlp16", "avia"] {
         let tmp = tempfile::tempdir().unwrap();
-        let sim = tmp.path().join("sim");
-        let o = run(&[
-            "simulate",
-            sim.to_str().unwrap(),
-            "--sessions",
-            "2",
-            "--keyframes",
-            "8",
-            "--sensor",
-            sensor,
-            "--seed",
-            "7",
-            "--format",
-            "json",
-        ]);
-        assert!(o.status.success(), "{sensor}: {}", stderr(&o));
-        let summary: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+        let summary = simulate(&tmp.path().join("sim"), 2, 8, 7, &["--sensor", sensor]);
         let store = tmp.path().join("site.seam");
         init_store(&store);
         for (k, s) in summary["sessions"].as_array().unwrap().iter().enumerate() {

@@ -206,3 +206,23 @@ pub fn run_client_check(out: &Path, expect: Option<&Path>) -> bool {
     eprintln!("{text}");
     true
 }
+
+/// `seam simulate OUT --sessions N --keyframes K --seed S [extra…] --format
+/// json`: the simulator's JSON summary (`sessions[k].dir`, `.points`, …).
+pub fn simulate(out: &Path, sessions: usize, keyframes: usize, seed: u64, extra: &[&str]) -> serde_json::Value {
+    let (n, k, seed) = (sessions.to_string(), keyframes.to_string(), seed.to_string());
+    let mut args = vec!["simulate", out.to_str().unwrap(), "--sessions", &n, "--keyframes", &k, "--seed", &seed];
+    args.extend_from_slice(extra);
+    args.extend_from_slice(&["--format", "json"]);
+    let o = run(&args);
+    assert!(o.status.success(), "seam {args:?}: {}", stderr(&o));
+    serde_json::from_str(&stdout(&o)).unwrap()
+}
+
+/// `seam ingest STORE DIR --quiet` for every session of a [`simulate`] summary, in order.
+pub fn ingest_all(store: &Path, summary: &serde_json::Value) {
+    for s in summary["sessions"].as_array().unwrap() {
+        let o = run(&["ingest", store.to_str().unwrap(), s["dir"].as_str().unwrap(), "--quiet"]);
+        assert!(o.status.success(), "{}", stderr(&o));
+    }
+}
