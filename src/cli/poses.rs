@@ -36,19 +36,9 @@ struct Row {
 
 /// Resolves `--session` (a number or a name) against the stored sessions.
 pub fn resolve_session(sessions: &[store::SessionRow], arg: &str) -> anyhow::Result<SessionId> {
-    let by_name = sessions.iter().find(|s| s.name == arg);
-    let by_number = arg
-        .trim_start_matches(['s', 'S'])
-        .parse::<i64>()
-        .ok()
-        .and_then(|n| sessions.iter().find(|s| s.session_id.0 == n));
-    by_name.or(by_number).map(|s| s.session_id).ok_or_else(|| {
-        let known: Vec<String> = sessions.iter().map(|s| format!("{} ({})", s.session_id.0, s.name)).collect();
-        UsageError(format!(
-            "no session {arg:?} in this store; it has: {}",
-            if known.is_empty() { "none".into() } else { known.join(", ") }
-        ))
-        .into()
+    store::find_session(sessions, arg).ok_or_else(|| {
+        UsageError(format!("no session {arg:?} in this store; it has: {}", store::session_list(sessions, "none")))
+            .into()
     })
 }
 

@@ -132,18 +132,8 @@ impl Scene {
 /// A session by name, or by number (`3` or `s3`) when no session has that
 /// name; otherwise an error listing the sessions that exist.
 pub fn resolve_session(sessions: &[SessionRow], arg: &str) -> Result<SessionId, RenderError> {
-    let by_name = sessions.iter().find(|s| s.name == arg);
-    let by_number = arg
-        .trim()
-        .trim_start_matches(['s', 'S'])
-        .parse::<i64>()
-        .ok()
-        .and_then(|n| sessions.iter().find(|s| s.session_id.0 == n));
-    by_name.or(by_number).map(|s| s.session_id).ok_or_else(|| {
-        let known: Vec<String> = sessions.iter().map(|s| format!("{} ({})", s.session_id.0, s.name)).collect();
-        RenderError::NoSuchSession {
-            arg: arg.to_string(),
-            known: if known.is_empty() { "none yet".into() } else { known.join(", ") },
-        }
+    crate::store::find_session(sessions, arg).ok_or_else(|| RenderError::NoSuchSession {
+        arg: arg.to_string(),
+        known: crate::store::session_list(sessions, "none yet"),
     })
 }

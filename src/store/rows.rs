@@ -39,6 +39,26 @@ pub struct SessionRow {
     pub completed_at: Option<String>,
 }
 
+/// The session named `arg`, or else the one numbered `arg` (`3` or `s3`): how
+/// every command's `--session` names a session.
+pub fn find_session(sessions: &[SessionRow], arg: &str) -> Option<SessionId> {
+    let by_name = sessions.iter().find(|s| s.name == arg);
+    let by_number = || {
+        let n = arg.trim_start_matches(['s', 'S']).parse::<i64>().ok()?;
+        sessions.iter().find(|s| s.session_id.0 == n)
+    };
+    by_name.or_else(by_number).map(|s| s.session_id)
+}
+
+/// `1 (s1), 2 (north walk)`, or `empty` when there are none: the sessions an
+/// error lists when `--session` names none of them.
+pub fn session_list(sessions: &[SessionRow], empty: &str) -> String {
+    if sessions.is_empty() {
+        return empty.to_string();
+    }
+    sessions.iter().map(|s| format!("{} ({})", s.session_id.0, s.name)).collect::<Vec<_>>().join(", ")
+}
+
 const SESSION_COLS: &str = "session_id, name, content_hash, source_dir, layout, date, sensor_model, fov_json, \
      keyframe_count, point_count, status, created_at, completed_at";
 
