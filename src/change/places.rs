@@ -141,7 +141,7 @@ impl SessionSummary {
         voxel_m: f64,
     ) -> Result<SessionSummary, crate::store::StoreError> {
         use super::Category as C;
-        use crate::store::session_event_positions as positions;
+        use crate::store::{session_event_count as count, session_event_positions as positions};
         let appeared = positions(conn, session, &[C::EmergedOverlap])?;
         let removed = positions(conn, session, &[C::DeletedOverlap])?;
         Ok(SessionSummary {
@@ -150,8 +150,8 @@ impl SessionSummary {
             voxel_m,
             appeared: places(&appeared, SUMMARY_LINK_M, SUMMARY_MIN_EVENTS),
             removed: places(&removed, SUMMARY_LINK_M, SUMMARY_MIN_EVENTS),
-            newly_mapped_voxels: positions(conn, session, &[C::EmergedNonOverlap])?.len(),
-            back_voxels: positions(conn, session, &[C::Coexist])?.len(),
+            newly_mapped_voxels: count(conn, session, C::EmergedNonOverlap)?,
+            back_voxels: count(conn, session, C::Coexist)?,
         })
     }
 

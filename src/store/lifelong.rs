@@ -363,3 +363,14 @@ pub fn session_event_positions(
     }
     Ok(out)
 }
+
+/// How many change events of session `session` are in `category`.
+pub fn session_event_count(conn: &Connection, session: SessionId, category: Category) -> Result<usize, StoreError> {
+    conn.query_row(
+        "SELECT count(*) FROM change_events WHERE session_id = ?1 AND category = ?2",
+        params![session.0, category.as_str()],
+        |r| r.get::<_, i64>(0),
+    )
+    .map(|n| n as usize)
+    .map_err(e(conn))
+}
