@@ -16,8 +16,10 @@ simulated session per sensor model (`seam simulate OUT --sessions 1 --sensor S
 Per dataset:
 
 1. `seam init` + `seam ingest` into a fresh store with the default config
-   ("seam", directional evidence) and into another with
-   `[evidence] model = "log_odds"` ("seam-scalar").
+   ("seam", directional evidence with the surface free test), into another
+   with `[evidence] model = "log_odds"` ("seam-scalar", same rays and test)
+   and into a third with `[evidence] free_test = "voxel"` ("seam
+   voxel-rule": the paper's rule, every voxel a ray crosses is free).
 2. `seam poses STORE --session NAME --format kitti` (and `--format json`
    for the keyframe indices) of the seam store: the LiDAR world poses DUFOMap
    gets, so both see the same scans at the same poses.
@@ -77,6 +79,9 @@ MOVING = (252, 259)
 REMOVED_LABEL = 252
 VOXEL_M = 0.2
 SCALAR_TOML = '[evidence]\nmodel = "log_odds"\n'
+# seam without its surface free test: the paper's voxel rule (every voxel a
+# ray crosses is free), to measure what the test buys.
+VOXEL_TOML = '[evidence]\nfree_test = "voxel"\n'
 SENSORS = "os1-64,hdl-64e,vlp16,hdl-32e,avia"
 DUFOMAP_DEFAULT = "0.1,0.2,1;0.1,0.2,2;0.2,0.2,1"
 
@@ -269,7 +274,7 @@ def eval_dor(seam, store, labels_dir, session, predicted=None, config=None):
     return seam.json(*args, config=config)
 
 
-def dataset_rows(args, seam, name, dir_, work, eval_ok, scalar_cfg):
+def dataset_rows(args, seam, name, dir_, work, eval_ok, scalar_cfg, voxel_cfg):
     out = {"dataset": name, "dir": str(dir_), "rows": [], "errors": []}
     stores = work / "stores" / name
     stores.mkdir(parents=True, exist_ok=True)
@@ -303,17 +308,19 @@ def dataset_rows(args, seam, name, dir_, work, eval_ok, scalar_cfg):
         return row
 
     out["rows"].append(seam_row("seam", stores / "seam.seam", None, "directional"))
-    if scalar_cfg is None:
-        out["rows"].append({"method": "seam-scalar", "skipped": "seam rejects the log_odds config (see above)"})
-    else:
-        log(f"[{name}] ingest (seam-scalar)")
+    for method, cfg, model in (("seam-scalar", scalar_cfg, "log_odds"), ("seam voxel-rule", voxel_cfg, "directional")):
+        if cfg is None:
+            out["rows"].append({"method": method, "skipped": "seam rejects its config (see above)"})
+            continue
+        log(f"[{name}] ingest ({method})")
+        store = stores / (method.replace(" ", "-") + ".seam")
         try:
-            r2, wall2 = ingest(seam, stores / "seam-scalar.seam", dir_, config=scalar_cfg)
-            busy["seam-scalar"] = r2.pop("_other_busy_cores")
-            out["seam_scalar_ingest_s"] = wall2
-            out["rows"].append(seam_row("seam-scalar", stores / "seam-scalar.seam", scalar_cfg, "log_odds"))
+            r2, wall2 = ingest(seam, store, dir_, config=cfg)
+            busy[method] = r2.pop("_other_busy_cores")
+            out[method.replace(" ", "_").replace("-", "_") + "_ingest_s"] = wall2
+            out["rows"].append(seam_row(method, store, cfg, model))
         except SeamError as e:
-            out["rows"].append({"method": "seam-scalar", "error": str(e)})
+            out["rows"].append({"method": method, "error": str(e)})
 
     for res, d_s, d_p in args.dufomap_cfgs:
         method = f"dufomap {res:g}/{d_s:g}/{d_p:g}"
@@ -479,6 +486,16 @@ def main():
         scalar_note = f"seam-scalar skipped everywhere: seam rejects {SCALAR_TOML.strip()!r}:\n{e}"
         log("note: " + scalar_note)
         scalar_cfg = None
+    voxel_cfg = work / "voxel_rule.toml"
+    voxel_cfg.write_text(VOXEL_TOML)
+    try:
+        probe = work / "probe-voxel.seam"
+        shutil.rmtree(probe, ignore_errors=True)
+        seam.run("init", probe, config=voxel_cfg)
+        shutil.rmtree(probe, ignore_errors=True)
+    except SeamError as e:
+        log(f"note: seam voxel-rule skipped everywhere: seam rejects {VOXEL_TOML.strip()!r}:\n{e}")
+        voxel_cfg = None
 
     datasets = []
     for seq in filter(None, (s.strip() for s in args.kitti.split(","))):
@@ -498,7 +515,7 @@ def main():
     results = []
     for name, d in datasets:
         try:
-            results.append(dataset_rows(args, seam, name, d, work, eval_ok, scalar_cfg))
+            results.append(dataset_rows(args, seam, name, d, work, eval_ok, scalar_cfg, voxel_cfg))
         except SeamError as e:
             log(f"[{name}] skipped: {e}")
             results.append({"dataset": name, "dir": str(d), "rows": [], "errors": [str(e)]})

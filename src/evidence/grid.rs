@@ -21,6 +21,7 @@
 
 use super::raycast::{cast_ray, voxel_key};
 use super::stats::{DirectionalStats, EvidenceConfig, EvidenceModel, VoxelEvidence};
+use super::surface::SurfaceShapes;
 use super::tables::{StatsColumns, SubmapEvidence};
 use crate::geometry::VoxelKey;
 use rayon::prelude::*;
@@ -106,7 +107,26 @@ impl Box3 {
         (0..3).all(|a| self.lo[a] <= k[a] && k[a] <= self.hi[a])
     }
 
-    fn dims(&self) -> [u64; 3] {
+    /// Index of `k` (inside the box) in x-fastest order, with `dims` from [`Self::dims`].
+    #[inline]
+    pub(super) fn index_of(&self, k: &[i32; 3], dims: &[u64; 3]) -> u64 {
+        let [x, y, z] = [0, 1, 2].map(|a| (k[a] as i64 - self.lo[a] as i64) as u64);
+        (z * dims[1] + y) * dims[0] + x
+    }
+
+    /// The range of sorted packed `keys` whose x lies in this box's x range.
+    pub(super) fn packed_x_range(&self, keys: &[u64]) -> (usize, usize) {
+        if self.is_empty() {
+            return (0, 0);
+        }
+        let start = |x: i64| ((x + AXIS_OFFSET).clamp(0, AXIS_MASK as i64 + 1) as u64) << (2 * AXIS_BITS);
+        let (x0, x1) = (start(self.lo[0] as i64), start(self.hi[0] as i64 + 1));
+        let lo = keys.partition_point(|&k| k < x0);
+        let hi = keys.partition_point(|&k| k < x1);
+        (lo.min(hi), hi)
+    }
+
+    pub(super) fn dims(&self) -> [u64; 3] {
         [0, 1, 2].map(|a| (self.hi[a] as i64 - self.lo[a] as i64 + 1).max(0) as u64)
     }
 
@@ -437,21 +457,22 @@ impl InterestEvidence {
         if b.is_empty() {
             return (0, 0);
         }
-        let start = |x: i64| ((x + AXIS_OFFSET).clamp(0, AXIS_MASK as i64 + 1) as u64) << (2 * AXIS_BITS);
-        let (x0, x1) = (start(b.lo[0] as i64), start(b.hi[0] as i64 + 1));
-        let lo = self.keys.partition_point(|&k| k < x0);
-        let hi = self.keys.partition_point(|&k| k < x1);
-        (lo.min(hi), hi)
+        b.packed_x_range(&self.keys)
     }
 
     /// Adds one keyframe's rays (sensor at `origin_m`, points `points_m`, both
     /// in this evidence's frame). Each voxel counts at most once per kind.
+    ///
+    /// With `shapes`, a ray frees a voxel that has a shape only if it passes
+    /// through that shape ([`VoxelShape::passes`]); voxels without one follow
+    /// the voxel rule.
     pub fn add_keyframe(
         &mut self,
         origin_m: &[f64; 3],
         points_m: &[[f64; 3]],
         keyframe: u32,
         cfg: &EvidenceConfig,
+        shapes: Option<&SurfaceShapes>,
     ) -> RayStats {
         let v = self.voxel_m;
         let mut out = RayStats { rays: points_m.len(), ..Default::default() };
@@ -464,6 +485,7 @@ impl InterestEvidence {
             points_m.iter().filter(|p| voxel_key(p, v).is_some()).count()
         } else {
             let marks = Marks::new(b);
+            let bits = shapes.map(|s| (s, s.bits_in(&b)));
             let cast: usize = points_m
                 .par_iter()
                 .with_min_len(2048)
@@ -476,7 +498,17 @@ impl InterestEvidence {
                         i32::MIN
                     };
                     let hit = cast_ray(origin_m, p, v, |k| {
-                        if k.0[2] >= kz_min {
+                        // A voxel with a shape takes the surface test, which
+                        // needs no clearance; the others the voxel rule.
+                        let shape = match &bits {
+                            Some((shapes, bits)) if bits.has(&k.0) => pack(k).and_then(|pk| shapes.get(pk)),
+                            _ => None,
+                        };
+                        let free = match shape {
+                            Some(s) => s.passes(k.0, v, origin_m, p),
+                            None => k.0[2] >= kz_min,
+                        };
+                        if free {
                             marks.mark(k, FREE)
                         }
                     });
@@ -674,7 +706,7 @@ mod tests {
         let mut ev = InterestEvidence::new(keys, cfg.voxel_size_m);
         let mut full = EvidenceMap::default();
         for (i, (o, p)) in frames.iter().enumerate() {
-            let a = ev.add_keyframe(o, p, i as u32, &cfg);
+            let a = ev.add_keyframe(o, p, i as u32, &cfg, None);
             accumulate_keyframe(o, p, i as u32, &cfg, &mut full);
             assert_eq!(a.skipped_rays, 0);
             assert!(a.hit_voxels > 0 && a.free_voxels > 0);
@@ -720,8 +752,8 @@ mod tests {
             let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
             pool.install(|| {
                 let mut ev = InterestEvidence::new(keys.clone(), 0.2);
-                ev.add_keyframe(&o, &pts, 0, &cfg);
-                ev.add_keyframe(&[1.0, 1.0, 1.0], &pts, 1, &cfg);
+                ev.add_keyframe(&o, &pts, 0, &cfg, None);
+                ev.add_keyframe(&[1.0, 1.0, 1.0], &pts, 1, &cfg, None);
                 ev.rows().to_vec()
             })
         };
@@ -749,14 +781,14 @@ mod tests {
         let target = [10.1, 0.1, 1.1];
         let keys = vec![packed_key(&target, 0.2).unwrap()];
         let mut ev = InterestEvidence::new(keys, 0.2);
-        ev.add_keyframe(&[0.1, 0.1, 1.1], &[target], 0, &cfg);
+        ev.add_keyframe(&[0.1, 0.1, 1.1], &[target], 0, &cfg, None);
         let after_hit = ev.eps_l(&cfg)[0] as f64;
         let mut want = 0.0f32;
         want = (want + l_hit).clamp(l_min, l_max);
         assert!((after_hit - (1.0 / (1.0 + (want as f64).exp())).clamp(0.1, 1.0)).abs() < 1e-6);
         assert!(after_hit < 0.5);
         for k in 1..=5 {
-            ev.add_keyframe(&[0.1, 0.1, 1.1], &[[20.1, 0.1, 1.1]], k, &cfg);
+            ev.add_keyframe(&[0.1, 0.1, 1.1], &[[20.1, 0.1, 1.1]], k, &cfg, None);
             want = (want + l_miss).clamp(l_min, l_max);
         }
         let eps = ev.eps_l(&cfg)[0] as f64;

@@ -30,6 +30,7 @@
 //! - `raycast.rs`: [`traverse`] and the free/hit rule [`cast_ray`]
 //! - `stats.rs`: [`EvidenceConfig`], [`DirectionalStats`], [`VoxelEvidence`],
 //!   closed-form 3×3 eigenvalues [`sym3_eigenvalues`]
+//! - `surface.rs`: the sub-voxel free test ([`surface::SurfaceShapes`])
 //! - `accumulate.rs`: [`accumulate_keyframe`] and its parallel twin
 //!   [`accumulate_keyframe_par`] into an [`EvidenceMap`]
 
@@ -38,9 +39,12 @@ pub mod grid;
 mod raycast;
 pub mod session;
 mod stats;
+pub mod surface;
 mod tables;
 
 pub use accumulate::{EvidenceMap, KeyframeEvidence, accumulate_keyframe, accumulate_keyframe_par};
 pub use raycast::{cast_ray, traverse, voxel_key};
-pub use stats::{DirectionalStats, EvidenceConfig, EvidenceModel, LogOddsConfig, VoxelEvidence, sym3_eigenvalues};
+pub use stats::{
+    DirectionalStats, EvidenceConfig, EvidenceModel, FreeTest, LogOddsConfig, VoxelEvidence, sym3_eigenvalues,
+};
 pub use tables::{CleanedMap, NO_HIT_BOX, PointLabels, StatsColumns, SubmapEvidence};

@@ -24,7 +24,8 @@
 
 use super::grid::{Box3, InterestEvidence, RayStats, Row, pack, packed_key, row_of, unpack};
 use super::raycast::voxel_key;
-use super::stats::EvidenceConfig;
+use super::stats::{EvidenceConfig, FreeTest};
+use super::surface::SurfaceShapes;
 use super::tables::{CleanedMap, NO_HIT_BOX, PointLabels, SubmapEvidence};
 use crate::geometry::{Pose, VoxelKey, transformed};
 use nalgebra::Point3;
@@ -113,6 +114,8 @@ pub fn generate(
     }
     drop(per_kf);
     let mut session = InterestEvidence::new(keys, v);
+    let shapes = (cfg.free_test == FreeTest::Surface)
+        .then(|| SurfaceShapes::build(session.keys(), keyframes.iter().map(world_points), v, cfg));
     let mut stats = GenerationStats {
         keyframes: keyframes.len(),
         points: keyframes.iter().map(|k| k.points.len()).sum(),
@@ -130,7 +133,7 @@ pub fn generate(
         let mut boxes = vec![EMPTY_BOX; sub.len()];
         for kf in keyframes.iter().filter(|k| k.submap == s) {
             let pts = world_points(kf);
-            rays += sub.add_keyframe(&origin(kf), &pts, kf.index, cfg);
+            rays += sub.add_keyframe(&origin(kf), &pts, kf.index, cfg, shapes.as_ref());
             grow_hit_boxes(&sub, &pts, &mut boxes);
             done += 1;
             progress(done);

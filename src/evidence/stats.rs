@@ -26,6 +26,11 @@ pub struct EvidenceConfig {
     pub n0: f64,
     /// Observing keyframes at which the support s saturates (eq. 7).
     pub n_sat: u32,
+    /// Floor of ω's direction factor: `ω = (ω_min + (1 − ω_min)·clip(α/α0, 0, 1))·min(1, Q/n0)`.
+    /// 0 is eq. 5. With 0, evidence from one direction weighs nothing, and
+    /// a voxel whose hits and frees each came from one direction has
+    /// `h + f = 0`.
+    pub omega_floor: f64,
     /// A voxel is dynamic when its clamped ε_l exceeds this.
     pub tau_dyn: f64,
     /// Lower clamp of ε_l before the Bayes update (0 would be absorbing).
@@ -56,11 +61,39 @@ pub struct EvidenceConfig {
     /// other keyframes hit. Movers stand above the ground, and rays that end
     /// above the sensor are not limited. 0 disables it.
     pub free_clearance_m: f64,
+    /// What a ray must do to free a voxel of interest: cross it (MATH.md §6,
+    /// `"voxel"`), or pass through the patch of points the session has in it
+    /// (`"surface"`, see `evidence::surface`).
+    pub free_test: FreeTest,
+    /// Surface test: a patch reaches this many standard deviations of its
+    /// points along each in-plane axis.
+    pub surface_sigmas: f64,
+    /// Surface test: slack added to the patch (range noise and pose error);
+    /// also the radius of a voxel with one or two points.
+    pub surface_tolerance_m: f64,
+    /// Surface test: a ray must end at least this far behind the patch's
+    /// plane (so a ray ending on the surface itself never frees it).
+    pub surface_behind_m: f64,
+    /// Surface test: only voxels that at least this many keyframes hit get
+    /// a shape; the others follow the voxel rule.
+    pub surface_min_keyframes: u32,
     /// Which per-voxel model turns rays into ε_l: seam's directional
     /// evidence, or the scalar log-odds baseline for the ablation.
     pub model: EvidenceModel,
     /// The scalar baseline's parameters (used when `model = "log_odds"`).
     pub log_odds: LogOddsConfig,
+}
+
+/// What counts as a ray freeing a voxel.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FreeTest {
+    /// Every voxel a ray crosses before its endpoint (MATH.md §6).
+    Voxel,
+    /// Only where the ray passes through the voxel's points and ends behind
+    /// them (`evidence::surface`).
+    #[default]
+    Surface,
 }
 
 /// The per-voxel model behind ε_l.
@@ -130,7 +163,8 @@ impl Default for EvidenceConfig {
             rs_m: 30.0,
             alpha0: 0.2,
             n0: 3.0,
-            n_sat: 5,
+            n_sat: 3,
+            omega_floor: 0.2,
             tau_dyn: 0.5,
             eps_min: 0.1,
             eps_max: 1.0,
@@ -138,6 +172,11 @@ impl Default for EvidenceConfig {
             free_guard_voxels: 1,
             static_neighbour_veto: false,
             free_clearance_m: 0.3,
+            free_test: FreeTest::Surface,
+            surface_sigmas: 2.0,
+            surface_tolerance_m: 0.03,
+            surface_behind_m: 0.1,
+            surface_min_keyframes: 2,
             model: EvidenceModel::Directional,
             log_odds: LogOddsConfig::default(),
         }
@@ -154,12 +193,20 @@ impl EvidenceConfig {
                 return Err(format!("evidence.{name} is {v}; it must be a positive number"));
             }
         }
-        for (name, v) in
-            [("r0_m", self.r0_m), ("pseudo_count", self.pseudo_count), ("free_clearance_m", self.free_clearance_m)]
-        {
+        for (name, v) in [
+            ("r0_m", self.r0_m),
+            ("pseudo_count", self.pseudo_count),
+            ("free_clearance_m", self.free_clearance_m),
+            ("surface_sigmas", self.surface_sigmas),
+            ("surface_tolerance_m", self.surface_tolerance_m),
+            ("surface_behind_m", self.surface_behind_m),
+        ] {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(format!("evidence.{name} is {v}; it must be zero or a positive number"));
             }
+        }
+        if !(0.0..=1.0).contains(&self.omega_floor) {
+            return Err(format!("evidence.omega_floor is {}; it must lie in [0, 1] (default 0)", self.omega_floor));
         }
         if self.n_sat == 0 {
             return Err("evidence.n_sat is 0; it must be at least 1 (default 5)".into());
@@ -231,7 +278,8 @@ impl DirectionalStats {
 
     /// Eq. 5: `ω = clip(α/α0, 0, 1) · min(1, Q/n0)`.
     pub fn omega(&self, cfg: &EvidenceConfig) -> f64 {
-        (self.alpha() / cfg.alpha0).clamp(0.0, 1.0) * (self.q_sum / cfg.n0).min(1.0)
+        let d = (self.alpha() / cfg.alpha0).clamp(0.0, 1.0);
+        (cfg.omega_floor + (1.0 - cfg.omega_floor) * d) * (self.q_sum / cfg.n0).min(1.0)
     }
 }
 
@@ -428,9 +476,14 @@ mod tests {
 
     const SPREAD: [[f64; 3]; 3] = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
 
+    /// Eqs. 5 and 7 as the paper writes them: no floor on ω, n_sat = 5.
+    fn paper() -> EvidenceConfig {
+        EvidenceConfig { omega_floor: 0.0, n_sat: 5, ..Default::default() }
+    }
+
     #[test]
     fn epsilon_l_follows_eqs_6_to_8() {
-        let cfg = EvidenceConfig::default();
+        let cfg = paper();
         // No free evidence: ε_l = 0 (clamped to 0.1), static.
         let hit_only = VoxelEvidence { hit: stats(6, &SPREAD), ..Default::default() };
         assert_eq!(hit_only.epsilon_l_raw(&cfg), 0.0);
@@ -469,11 +522,31 @@ mod tests {
 
     #[test]
     fn omega_saturates_in_alpha_and_weight() {
-        let cfg = EvidenceConfig::default();
+        let cfg = paper();
         assert!((stats(3, &SPREAD).omega(&cfg) - 1.0).abs() < 1e-12);
         assert!((stats(1, &SPREAD).omega(&cfg) - 0.0).abs() < 1e-12, "one direction");
         // Two orthogonal directions at q = 1: α = 1, Q = 2 → 2/3.
         assert!((stats(2, &SPREAD).omega(&cfg) - 2.0 / 3.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn omega_floor_lets_one_direction_count() {
+        let cfg = EvidenceConfig::default();
+        assert_eq!((cfg.omega_floor, cfg.n_sat), (0.2, 3));
+        // One direction: ω = floor · min(1, Q/n0).
+        assert!((stats(1, &SPREAD).omega(&cfg) - 0.2 / 3.0).abs() < 1e-12);
+        assert!((stats(3, &SPREAD).omega(&cfg) - 1.0).abs() < 1e-12, "spread: the floor changes nothing");
+        // A mover: hit once, then seen through twice, all along one line of
+        // sight. Eq. 8 with the paper's ω gives 0/0 = 0 (kept); with the
+        // floor h = 1·0.2/3, f = 2·0.4/3, s = 1 → ε_l = 0.8 (removed).
+        let dir = [[1.0, 0.2, 0.0]];
+        let mover = VoxelEvidence { hit: stats(1, &dir), free: stats(2, &dir), ..Default::default() };
+        assert_eq!(mover.epsilon_l_raw(&paper()), 0.0);
+        assert!((mover.epsilon_l_raw(&cfg) - 0.8).abs() < 1e-12);
+        assert!(mover.is_dynamic(&cfg));
+        // A wall hit by six keyframes from one side and grazed by two stays.
+        let wall = VoxelEvidence { hit: stats(6, &dir), free: stats(2, &dir), ..Default::default() };
+        assert!(!wall.is_dynamic(&cfg), "ε_l = {}", wall.epsilon_l_raw(&cfg));
     }
 
     #[test]
