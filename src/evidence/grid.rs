@@ -464,7 +464,7 @@ impl InterestEvidence {
     /// in this evidence's frame). Each voxel counts at most once per kind.
     ///
     /// With `shapes`, a ray frees a voxel that has a shape only if it passes
-    /// through that shape ([`VoxelShape::passes`]); voxels without one follow
+    /// through that shape ([`super::surface::VoxelShape::passes`]); voxels without one follow
     /// the voxel rule.
     pub fn add_keyframe(
         &mut self,
@@ -498,19 +498,19 @@ impl InterestEvidence {
                         i32::MIN
                     };
                     let hit = cast_ray(origin_m, p, v, |k| {
-                        // A voxel with a shape takes the surface test, which
-                        // needs no clearance; the others the voxel rule.
-                        let shape = match &bits {
-                            Some((shapes, bits)) if bits.has(&k.0) => pack(k).and_then(|pk| shapes.get(pk)),
-                            _ => None,
-                        };
-                        let free = match shape {
-                            Some(s) => s.passes(k.0, v, origin_m, p),
-                            None => k.0[2] >= kz_min,
-                        };
-                        if free {
-                            marks.mark(k, FREE)
+                        if k.0[2] < kz_min {
+                            return;
                         }
+                        // A voxel with a shape frees only where the ray
+                        // crosses it (evidence::surface).
+                        if let Some((shapes, bits)) = &bits
+                            && bits.has(&k.0)
+                            && let Some(shape) = pack(k).and_then(|pk| shapes.get(pk))
+                            && !shape.passes(k.0, v, origin_m, p)
+                        {
+                            return;
+                        }
+                        marks.mark(k, FREE)
                     });
                     if let Some(k) = hit {
                         marks.mark(k, HIT);

@@ -3,7 +3,8 @@
 //! ```text
 //!  keyframe: sensor origin + points        (one submap's frame)
 //!        │  raycast: Amanatides-Woo walk; endpoint voxel = hit,
-//!        │           voxels up to two before it = free
+//!        │           voxels up to two before it = free, where the ray
+//!        │           crosses the voxel's patch of points (surface.rs)
 //!        ▼
 //!  per-keyframe marks {voxel → hit/free}   (each voxel once per keyframe and kind)
 //!        │  accumulate: q = exp(-max(0, r - r0)/rs), u = sensor → voxel centre   (4)

@@ -25,6 +25,18 @@
 //! session's map voxel) has no shape here: with one or two points the test is
 //! a ball of radius `tol` around them, with none the voxel rule applies.
 //!
+//! The surface test comes on top of the other free rules of
+//! `EvidenceConfig` (a keyframe's own hits and their neighbours, the ground
+//! clearance), not instead of them: without the clearance, SemanticKITTI 04
+//! kept 99.45 % of its static points instead of 99.74 % (10 scans, its own
+//! poses, `examples/dor_probe`).
+//!
+//! Measured with `examples/dor_probe` on true poses, against the voxel rule
+//! with the same other settings (point-wise PR / RR, precision of removal):
+//! KITTI 04 99.74 / 73.9 / 80 % vs 99.64 / 74.4 / 75 %; KITTI 08 99.52 / 4.4
+//! vs 99.24 / 4.7; simulated OS1-64 (60 keyframes) 99.62 / 70.2 / 31 % vs
+//! 99.02 / 72.0 / 15 %. It costs about a fifth of the ray casting speed.
+//!
 //! Choice, not in the paper (which keeps free evidence per voxel and leaves
 //! open what a pass is); `[evidence] free_test = "voxel"` restores the plain
 //! rule. Written by hand: it is a few lines of geometry on the grid's own
