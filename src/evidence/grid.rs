@@ -498,19 +498,19 @@ impl InterestEvidence {
                         i32::MIN
                     };
                     let hit = cast_ray(origin_m, p, v, |k| {
-                        if k.0[2] < kz_min {
-                            return;
-                        }
                         // A voxel with a shape frees only where the ray
                         // crosses it (evidence::surface).
-                        if let Some((shapes, bits)) = &bits
-                            && bits.has(&k.0)
-                            && let Some(shape) = pack(k).and_then(|pk| shapes.get(pk))
-                            && !shape.passes(k.0, v, origin_m, p)
-                        {
-                            return;
+                        let shape = match &bits {
+                            Some((shapes, bits)) if bits.has(&k.0) => pack(k).and_then(|pk| shapes.get(pk)),
+                            _ => None,
+                        };
+                        let free = match shape {
+                            Some(s) => (s.clearance_exempt || k.0[2] >= kz_min) && s.passes(k.0, v, origin_m, p),
+                            None => k.0[2] >= kz_min,
+                        };
+                        if free {
+                            marks.mark(k, FREE)
                         }
-                        marks.mark(k, FREE)
                     });
                     if let Some(k) = hit {
                         marks.mark(k, HIT);

@@ -77,6 +77,10 @@ pub struct EvidenceConfig {
     /// Surface test: only voxels that at least this many keyframes hit get
     /// a shape; the others follow the voxel rule.
     pub surface_min_keyframes: u32,
+    /// Surface test on a voxel fewer keyframes hit: it gets a shape too if
+    /// its points spread at least this much (σ) along both in-plane axes,
+    /// and then rays free it below the ground clearance. 0: never.
+    pub surface_single_sigma_m: f64,
     /// Which per-voxel model turns rays into ε_l: seam's directional
     /// evidence, or the scalar log-odds baseline for the ablation.
     pub model: EvidenceModel,
@@ -177,6 +181,7 @@ impl Default for EvidenceConfig {
             surface_tolerance_m: 0.03,
             surface_behind_m: 0.1,
             surface_min_keyframes: 2,
+            surface_single_sigma_m: 0.03,
             model: EvidenceModel::Directional,
             log_odds: LogOddsConfig::default(),
         }
@@ -200,6 +205,7 @@ impl EvidenceConfig {
             ("surface_sigmas", self.surface_sigmas),
             ("surface_tolerance_m", self.surface_tolerance_m),
             ("surface_behind_m", self.surface_behind_m),
+            ("surface_single_sigma_m", self.surface_single_sigma_m),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(format!("evidence.{name} is {v}; it must be zero or a positive number"));

@@ -89,7 +89,8 @@ pub(super) fn changes(ctx: &mut StepCtx<'_>, step: &'static str, seq: i64) -> Re
     let reliability = ctx.config.change.deleted_reliability;
     let free_at = |k: u64| {
         evidence.get(k).map(|r| {
-            let support = r.free_n.min(ecfg.n_sat) as f64 / ecfg.n_sat.max(1) as f64;
+            let n_sat = ctx.config.change.free_support_keyframes.max(1);
+            let support = r.free_n.min(n_sat) as f64 / n_sat as f64;
             (r.free_n, reliability.of(r.evidence().free.omega(ecfg), support) as f32)
         })
     };
