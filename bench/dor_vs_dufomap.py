@@ -474,28 +474,25 @@ def main():
     if not eval_ok:
         log("note: this seam binary has no `seam eval dor`: seam rows are n/a and DUFOMap is scored in Python "
             "(rows marked py)")
-    scalar_cfg = work / "log_odds.toml"
-    scalar_cfg.write_text(SCALAR_TOML)
-    scalar_note = None
-    try:  # once, rather than one identical failure per dataset
-        probe = work / "probe-log_odds.seam"
-        shutil.rmtree(probe, ignore_errors=True)
-        seam.run("init", probe, config=scalar_cfg)
-        shutil.rmtree(probe, ignore_errors=True)
-    except SeamError as e:
-        scalar_note = f"seam-scalar skipped everywhere: seam rejects {SCALAR_TOML.strip()!r}:\n{e}"
-        log("note: " + scalar_note)
-        scalar_cfg = None
-    voxel_cfg = work / "voxel_rule.toml"
-    voxel_cfg.write_text(VOXEL_TOML)
-    try:
-        probe = work / "probe-voxel.seam"
-        shutil.rmtree(probe, ignore_errors=True)
-        seam.run("init", probe, config=voxel_cfg)
-        shutil.rmtree(probe, ignore_errors=True)
-    except SeamError as e:
-        log(f"note: seam voxel-rule skipped everywhere: seam rejects {VOXEL_TOML.strip()!r}:\n{e}")
-        voxel_cfg = None
+    def variant_config(method, name, text):
+        """The config file of a seam variant, or None (and a note) when this
+        seam rejects it: checked once, rather than one identical failure per
+        dataset."""
+        cfg = work / f"{name}.toml"
+        cfg.write_text(text)
+        probe = work / f"probe-{name}.seam"
+        try:
+            shutil.rmtree(probe, ignore_errors=True)
+            seam.run("init", probe, config=cfg)
+            shutil.rmtree(probe, ignore_errors=True)
+            return cfg, None
+        except SeamError as e:
+            note = f"{method} skipped everywhere: seam rejects {text.strip()!r}:\n{e}"
+            log("note: " + note)
+            return None, note
+
+    scalar_cfg, scalar_note = variant_config("seam-scalar", "log_odds", SCALAR_TOML)
+    voxel_cfg, _ = variant_config("seam voxel-rule", "voxel_rule", VOXEL_TOML)
 
     datasets = []
     for seq in filter(None, (s.strip() for s in args.kitti.split(","))):

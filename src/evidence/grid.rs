@@ -180,8 +180,7 @@ impl Marks {
 
     #[inline]
     fn index(&self, k: &[i32; 3]) -> u64 {
-        let [x, y, z] = [0, 1, 2].map(|a| (k[a] as i64 - self.b.lo[a] as i64) as u64);
-        (z * self.dims[1] + y) * self.dims[0] + x
+        self.b.index_of(k, &self.dims)
     }
 
     #[inline]
@@ -464,8 +463,8 @@ impl InterestEvidence {
     /// in this evidence's frame). Each voxel counts at most once per kind.
     ///
     /// With `shapes`, a ray frees a voxel that has a shape only if it passes
-    /// through that shape ([`super::surface::VoxelShape::passes`]); voxels without one follow
-    /// the voxel rule.
+    /// through that shape ([`super::surface::VoxelShape::passes`]); voxels
+    /// without one follow the voxel rule.
     pub fn add_keyframe(
         &mut self,
         origin_m: &[f64; 3],

@@ -4,7 +4,7 @@
 //! ```text
 //!  keyframes (world poses of graph version g, scans)
 //!     │ interest set: every point's voxel (+ earlier sessions' map voxels)
-//!     │ surface shapes: the patch of points in each voxel ≥ 2 keyframes hit
+//!     │ surface shapes: the patch of points per voxel (evidence::surface)
 //!     ▼
 //!  per submap, keyframes in order:  InterestEvidence::add_keyframe   ──► SubmapEvidence (stored)
 //!     │ summed over submaps (same grid: no re-binning)

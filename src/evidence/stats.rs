@@ -74,12 +74,13 @@ pub struct EvidenceConfig {
     /// Surface test: a ray must end at least this far behind the patch's
     /// plane (so a ray ending on the surface itself never frees it).
     pub surface_behind_m: f64,
-    /// Surface test: only voxels that at least this many keyframes hit get
-    /// a shape; the others follow the voxel rule.
+    /// Surface test: voxels that at least this many keyframes hit get a
+    /// shape; fewer, see `surface_single_sigma_m`.
     pub surface_min_keyframes: u32,
     /// Surface test on a voxel fewer keyframes hit: it gets a shape too if
     /// its points spread at least this much (σ) along both in-plane axes,
-    /// and then rays free it below the ground clearance. 0: never.
+    /// and then rays free it below the ground clearance; otherwise it
+    /// follows the voxel rule. 0: never.
     pub surface_single_sigma_m: f64,
     /// Which per-voxel model turns rays into ε_l: seam's directional
     /// evidence, or the scalar log-odds baseline for the ablation.
@@ -212,10 +213,10 @@ impl EvidenceConfig {
             }
         }
         if !(0.0..=1.0).contains(&self.omega_floor) {
-            return Err(format!("evidence.omega_floor is {}; it must lie in [0, 1] (default 0)", self.omega_floor));
+            return Err(format!("evidence.omega_floor is {}; it must lie in [0, 1] (default 0.2)", self.omega_floor));
         }
         if self.n_sat == 0 {
-            return Err("evidence.n_sat is 0; it must be at least 1 (default 5)".into());
+            return Err("evidence.n_sat is 0; it must be at least 1 (default 3)".into());
         }
         if !(0.0 <= self.eps_min && self.eps_min <= self.eps_max && self.eps_max <= 1.0) {
             return Err(format!(
@@ -282,7 +283,8 @@ impl DirectionalStats {
         if l2 > 0.0 && l1 > ALPHA_FLOOR * l2 { (l1 / l2).clamp(0.0, 1.0) } else { 0.0 }
     }
 
-    /// Eq. 5: `ω = clip(α/α0, 0, 1) · min(1, Q/n0)`.
+    /// Eq. 5 with a floor: `ω = (ω_min + (1 − ω_min)·clip(α/α0, 0, 1)) ·
+    /// min(1, Q/n0)`, ω_min = `omega_floor` (0 is the paper's eq. 5).
     pub fn omega(&self, cfg: &EvidenceConfig) -> f64 {
         let d = (self.alpha() / cfg.alpha0).clamp(0.0, 1.0);
         (cfg.omega_floor + (1.0 - cfg.omega_floor) * d) * (self.q_sum / cfg.n0).min(1.0)

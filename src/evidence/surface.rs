@@ -117,7 +117,9 @@ fn dot(a: &[f64; 3], b: &[f64; 3]) -> f64 {
 }
 
 impl VoxelShape {
-    fn from_moments(m: &Moments, cfg: &EvidenceConfig) -> VoxelShape {
+    /// The shape of a voxel's points, and the smaller standard deviation of
+    /// the two in its plane (0 for a ball).
+    fn from_moments(m: &Moments, cfg: &EvidenceConfig) -> (VoxelShape, f32) {
         let n = m.n as f64;
         let mean = m.s.map(|s| s / n);
         let tol = cfg.surface_tolerance_m as f32;
@@ -133,7 +135,7 @@ impl VoxelShape {
             clearance_exempt: false,
         };
         if m.n < 3 {
-            return ball;
+            return (ball, 0.0);
         }
         let c = |i: usize, a: usize, b: usize| m.ss[i] / n - mean[a] * mean[b];
         let cov = Matrix3::new(
@@ -156,7 +158,7 @@ impl VoxelShape {
         };
         let sigma = |i: usize| eig.eigenvalues[order[i]].max(0.0).sqrt() as f32;
         let k = cfg.surface_sigmas as f32;
-        VoxelShape {
+        let shape = VoxelShape {
             normal: axis(0),
             e1: axis(1),
             e2: axis(2),
@@ -164,7 +166,8 @@ impl VoxelShape {
             half2_m: k * sigma(2) + tol,
             behind_m: behind.max(k * sigma(0)),
             ..ball
-        }
+        };
+        (shape, sigma(1))
     }
 
     /// Whether the ray from `origin_m` to `end_m` (world) passes through this
@@ -209,7 +212,6 @@ pub struct SurfaceShapes {
     /// Packed key → index, for rays (a hash probe is several times faster
     /// than a binary search over a million keys).
     index: FxHashMap<u64, u32>,
-    voxel_m: f64,
 }
 
 impl SurfaceShapes {
@@ -266,20 +268,17 @@ impl SurfaceShapes {
             .zip(moments.par_iter())
             .filter(|(_, m)| m.n > 0)
             .filter_map(|(&k, m)| {
-                let s = VoxelShape::from_moments(m, cfg);
+                let (s, sigma_in_plane) = VoxelShape::from_moments(m, cfg);
                 if m.keyframes >= cfg.surface_min_keyframes {
                     return Some((k, s));
                 }
-                let sigma1 = (s.half1_m - cfg.surface_tolerance_m as f32) / cfg.surface_sigmas as f32;
-                (cfg.surface_single_sigma_m > 0.0
-                    && s.normal != [0.0; 3]
-                    && sigma1 >= cfg.surface_single_sigma_m as f32)
+                (cfg.surface_single_sigma_m > 0.0 && sigma_in_plane >= cfg.surface_single_sigma_m as f32)
                     .then_some((k, VoxelShape { clearance_exempt: true, ..s }))
             })
             .unzip();
         let mut index = FxHashMap::with_capacity_and_hasher(keys.len(), Default::default());
         index.extend(keys.iter().enumerate().map(|(i, &k)| (k, i as u32)));
-        SurfaceShapes { keys, shapes, index, voxel_m }
+        SurfaceShapes { keys, shapes, index }
     }
 
     pub fn len(&self) -> usize {
@@ -312,10 +311,6 @@ impl SurfaceShapes {
             }
         }
         ShapeBits { blocks, dims, words }
-    }
-
-    pub fn voxel_m(&self) -> f64 {
-        self.voxel_m
     }
 }
 
@@ -352,7 +347,7 @@ mod tests {
         for p in points {
             m.add(std::array::from_fn(|a| p[a] - (key[a] as f64 + 0.5) * v));
         }
-        VoxelShape::from_moments(&m, cfg)
+        VoxelShape::from_moments(&m, cfg).0
     }
 
     /// A vertical scaffold tube of radius 24 mm at x = y = 1.1 inside voxel
