@@ -64,20 +64,7 @@ fn names(dir: &Path) -> Vec<String> {
 
 /// A session row with no folder behind it, named and hashed `name`.
 fn fake_session(tx: &rusqlite::Transaction<'_>, name: &str, keyframes: i64) -> Result<SessionId, StoreError> {
-    insert_session(
-        tx,
-        &NewSession {
-            name,
-            content_hash: name,
-            source_dir: "/nowhere",
-            layout: "kitti",
-            date: None,
-            sensor_model: None,
-            fov_json: None,
-            keyframe_count: keyframes,
-            point_count: 1000,
-        },
-    )
+    insert_session(tx, &NewSession { keyframe_count: keyframes, point_count: 1000, ..bare_session(name) })
 }
 
 #[test]

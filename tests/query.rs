@@ -140,15 +140,11 @@ fn build_synthetic(root: &Path) {
                 let sid = insert_session(
                     tx,
                     &NewSession {
-                        name,
-                        content_hash: name,
-                        source_dir: "/nowhere",
-                        layout: "kitti",
                         date: Some(date),
                         sensor_model: Some("os1-64"),
-                        fov_json: None,
                         keyframe_count: 2,
                         point_count: 100 * (i as i64 + 1),
+                        ..bare_session(name)
                     },
                 )?;
                 store::set_session_complete(tx, sid)?;

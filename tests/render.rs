@@ -143,18 +143,15 @@ fn synthetic_store(tmp: &Path) -> PathBuf {
             let mut anchors = Vec::new();
             let mut locals = Vec::new();
             for (i, name) in ["s1", "north walk", "s3"].iter().enumerate() {
+                let date = format!("2026-0{}-01", i + 1);
                 let sid = insert_session(
                     tx,
                     &NewSession {
-                        name,
-                        content_hash: name,
-                        source_dir: "/nowhere",
-                        layout: "kitti",
-                        date: Some(&format!("2026-0{}-01", i + 1)),
+                        date: Some(&date),
                         sensor_model: Some("os1-64"),
-                        fov_json: None,
                         keyframe_count: 5,
                         point_count: 1000 * (i as i64 + 1),
+                        ..bare_session(name)
                     },
                 )?;
                 let kfs: Vec<NewKeyframe> = (0..5)

@@ -226,3 +226,19 @@ pub fn ingest_all(store: &Path, summary: &serde_json::Value) {
         assert!(o.status.success(), "{}", stderr(&o));
     }
 }
+
+/// A session row with no folder behind it, named and hashed `name`, for
+/// tests that build a store by hand; set the other fields with `..`.
+pub fn bare_session(name: &str) -> seam::store::NewSession<'_> {
+    seam::store::NewSession {
+        name,
+        content_hash: name,
+        source_dir: "/nowhere",
+        layout: "kitti",
+        date: None,
+        sensor_model: None,
+        fov_json: None,
+        keyframe_count: 0,
+        point_count: 0,
+    }
+}
