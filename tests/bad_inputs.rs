@@ -255,9 +255,10 @@ fn bad_alignment_options_and_settings() {
     assert_same_state(&before, &store_state(&store), "after eval align with a bad --gt");
 }
 
-/// The evidence stage's inputs (issue 4): an unknown evidence model or a
-/// negative clearance in the config is a usage error (exit 2) naming the
-/// key; `seam eval dor` with a labels folder that has no labels, or a session
+/// The evidence stage's inputs (issue 4): an unknown evidence model or free
+/// test, a negative clearance or surface tolerance, an ω floor above 1 or
+/// no free support in the config is a usage error (exit 2) naming the key
+/// (or the values it takes); `seam eval dor` with a labels folder that has no labels, or a session
 /// the store does not have, is a data error (exit 4) naming the file or the
 /// sessions there are. The store is unchanged every time.
 #[test]
@@ -273,11 +274,23 @@ fn bad_evidence_settings_and_dor_inputs() {
     std::fs::write(&clamp, "[change]\neps_g_min = 0.9\neps_g_max = 0.1\n").unwrap();
     let reliability = t.path().join("reliability.toml");
     std::fs::write(&reliability, "[change]\ndeleted_reliability = \"support\"\n").unwrap();
+    let floor = t.path().join("floor.toml");
+    std::fs::write(&floor, "[evidence]\nomega_floor = 1.5\n").unwrap();
+    let tolerance = t.path().join("tolerance.toml");
+    std::fs::write(&tolerance, "[evidence]\nsurface_tolerance_m = -0.03\n").unwrap();
+    let free_test = t.path().join("free_test.toml");
+    std::fs::write(&free_test, "[evidence]\nfree_test = \"ray\"\n").unwrap();
+    let support = t.path().join("support.toml");
+    std::fs::write(&support, "[change]\nfree_support_keyframes = 0\n").unwrap();
     for (cfg, fragment) in [
         (&model, "octomap"),
         (&clearance, "free_clearance_m"),
         (&clamp, "eps_g_min"),
         (&reliability, "omega_or_half_support"),
+        (&floor, "omega_floor"),
+        (&tolerance, "surface_tolerance_m"),
+        (&free_test, "surface"),
+        (&support, "free_support_keyframes"),
     ] {
         let o = run(&["--config", cfg.to_str().unwrap(), "ingest", st, dir]);
         assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
