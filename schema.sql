@@ -294,3 +294,11 @@ CREATE TABLE zones (
 DROP INDEX change_events_by_tile;
 CREATE INDEX change_events_by_tile_cover
     ON change_events(tile, session_id, x_m, y_m, z_m, category, eps_g_before, eps_g_after, voxel_id);
+
+-- @migration 6
+-- The spread of each lifelong voxel's points: their covariance about the
+-- centroid (m², world frame of map_state's graph version), as six
+-- little-endian float32 `[xx, xy, xz, yy, yz, zz]`. Later sessions' rays must
+-- cross the patch it describes to count as seeing the voxel gone
+-- (`evidence::surface`). NULL for voxels stored before.
+ALTER TABLE map_voxels ADD COLUMN spread_m2 BLOB;

@@ -212,6 +212,7 @@ fn map_voxel(i: usize) -> MapVoxel {
         category_session: s,
         owner_session: s,
         owner_keyframe: (i % 7) as u32,
+        spread_m2: seam::geometry::UNKNOWN_SPREAD,
     }
 }
 

@@ -105,6 +105,7 @@ fn truth_voxels() -> Vec<MapVoxel> {
                 category_session: first,
                 owner_session: first,
                 owner_keyframe: 0,
+                spread_m2: seam::geometry::UNKNOWN_SPREAD,
             }
         })
         .collect()

@@ -60,6 +60,7 @@ fn voxel(id: i64, key: [i32; 3], xyz_m: [f64; 3], eps_g: f32) -> MapVoxel {
         category_session: 1,
         owner_session: 1,
         owner_keyframe: 0,
+        spread_m2: seam::geometry::UNKNOWN_SPREAD,
     }
 }
 

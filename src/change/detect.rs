@@ -29,7 +29,7 @@
 
 use super::lifelong::{Category, ChangeEvent, LifelongMap, MapVoxel};
 use crate::evidence::grid::{pack, unpack};
-use crate::geometry::VoxelKey;
+use crate::geometry::{Sym3, UNKNOWN_SPREAD, VoxelKey};
 use crate::registration::kdtree::{KdTree, to_f32};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -166,6 +166,20 @@ pub struct NewVoxel {
     pub owner_keyframe: u32,
     /// ω of the session's hit evidence at the voxel.
     pub omega_hit: f32,
+    /// Covariance of the static points about the centroid, m² (see
+    /// `CleanedMap::spread_m2`).
+    pub spread_m2: Sym3,
+}
+
+/// One row of a submap's cleaned map, in the world frame of the current
+/// graph version.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CleanedRow {
+    pub xyz_m: [f64; 3],
+    pub eps_l: f32,
+    pub points: u32,
+    pub owner_keyframe: u32,
+    pub spread_m2: Sym3,
 }
 
 /// The new session's free evidence at a voxel: `(n_free, w)`, `w` its
@@ -280,6 +294,7 @@ pub fn update_map(
                 if n.key == x.key {
                     // The newest observation places the voxel from now on.
                     y.xyz_m = n.xyz_m;
+                    y.spread_m2 = n.spread_m2;
                     y.points = n.points;
                     y.owner_session = session;
                     y.owner_keyframe = n.owner_keyframe;
@@ -353,6 +368,7 @@ pub fn update_map(
             category_session: session,
             owner_session: session,
             owner_keyframe: n.owner_keyframe,
+            spread_m2: n.spread_m2,
         };
         id += 1;
         if matches!(category, Category::EmergedOverlap | Category::EmergedNonOverlap) {
@@ -376,34 +392,62 @@ pub fn update_map(
 }
 
 /// Merges cleaned-map rows (several submaps can hold one voxel) into sorted
-/// unique [`NewVoxel`]s: point-weighted centroid, the owner of the larger
-/// share. `omega_hit_at` gives the session's ω_hit per packed key.
+/// unique [`NewVoxel`]s: point-weighted centroid, the pooled spread, the
+/// owner of the larger share. `omega_hit_at` gives the session's ω_hit per
+/// packed key.
 pub fn new_voxels(
-    rows: impl IntoIterator<Item = ([f64; 3], f32, u32, u32)>,
+    rows: impl IntoIterator<Item = CleanedRow>,
     voxel_m: f64,
     omega_hit_at: impl Fn(u64) -> f32,
 ) -> Vec<NewVoxel> {
-    let mut by_key: rustc_hash::FxHashMap<u64, (NewVoxel, u32)> = rustc_hash::FxHashMap::default();
-    for (xyz, eps_l, points, owner) in rows {
-        let Some(k) = crate::evidence::grid::packed_key(&xyz, voxel_m) else { continue };
-        let e = by_key.entry(k).or_insert((
-            NewVoxel { key: unpack(k), xyz_m: [0.0; 3], eps_l, points: 0, owner_keyframe: owner, omega_hit: 0.0 },
-            0,
-        ));
-        let total = e.0.points + points;
-        for (c, x) in e.0.xyz_m.iter_mut().zip(xyz) {
-            *c = (*c * e.0.points as f64 + x * points as f64) / total.max(1) as f64;
+    /// Point-weighted sums: Σ n x and Σ n (C + x xᵀ), for the pooled centroid
+    /// and covariance.
+    struct Acc {
+        voxel: NewVoxel,
+        best: u32,
+        sum: [f64; 3],
+        sum_sq: [f64; 6],
+    }
+    const PAIRS: [(usize, usize); 6] = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)];
+    let mut by_key: rustc_hash::FxHashMap<u64, Acc> = rustc_hash::FxHashMap::default();
+    for r in rows {
+        let Some(k) = crate::evidence::grid::packed_key(&r.xyz_m, voxel_m) else { continue };
+        let e = by_key.entry(k).or_insert(Acc {
+            voxel: NewVoxel {
+                key: unpack(k),
+                xyz_m: [0.0; 3],
+                eps_l: r.eps_l,
+                points: 0,
+                owner_keyframe: r.owner_keyframe,
+                omega_hit: 0.0,
+                spread_m2: UNKNOWN_SPREAD,
+            },
+            best: 0,
+            sum: [0.0; 3],
+            sum_sq: [0.0; 6],
+        });
+        let w = r.points as f64;
+        for a in 0..3 {
+            e.sum[a] += w * r.xyz_m[a];
         }
-        if points > e.1 {
-            e.1 = points;
-            e.0.owner_keyframe = owner;
+        for (j, (p, q)) in PAIRS.into_iter().enumerate() {
+            e.sum_sq[j] += w * (r.spread_m2[j] as f64 + r.xyz_m[p] * r.xyz_m[q]);
         }
-        e.0.points = total;
-        e.0.eps_l = e.0.eps_l.max(eps_l);
+        if r.points > e.best {
+            e.best = r.points;
+            e.voxel.owner_keyframe = r.owner_keyframe;
+        }
+        e.voxel.points += r.points;
+        e.voxel.eps_l = e.voxel.eps_l.max(r.eps_l);
     }
     let mut out: Vec<(u64, NewVoxel)> = by_key
         .into_iter()
-        .map(|(k, (mut n, _))| {
+        .map(|(k, e)| {
+            let mut n = e.voxel;
+            let total = n.points.max(1) as f64;
+            n.xyz_m = e.sum.map(|s| s / total);
+            n.spread_m2 =
+                std::array::from_fn(|j| (e.sum_sq[j] / total - n.xyz_m[PAIRS[j].0] * n.xyz_m[PAIRS[j].1]) as f32);
             n.omega_hit = omega_hit_at(k);
             (k, n)
         })
@@ -425,6 +469,7 @@ mod tests {
             points: 5,
             owner_keyframe: 0,
             omega_hit: 0.5,
+            spread_m2: [1e-4, 0.0, 0.0, 1e-4, 0.0, 1e-6],
         }
     }
 
@@ -548,10 +593,18 @@ mod tests {
 
     #[test]
     fn new_voxels_merge_submaps_by_key() {
+        let row = |xyz_m, eps_l, points, owner_keyframe, spread_m2| CleanedRow {
+            xyz_m,
+            eps_l,
+            points,
+            owner_keyframe,
+            spread_m2,
+        };
+        let flat = [1e-4, 0.0, 0.0, 1e-4, 0.0, 0.0];
         let rows = vec![
-            ([0.05, 0.05, 0.05], 0.1f32, 2u32, 3u32),
-            ([0.15, 0.05, 0.05], 0.3, 6, 9),
-            ([1.0, 1.0, 1.0], 0.1, 1, 1),
+            row([0.05, 0.05, 0.05], 0.1f32, 2u32, 3u32, flat),
+            row([0.15, 0.05, 0.05], 0.3, 6, 9, flat),
+            row([1.0, 1.0, 1.0], 0.1, 1, 1, UNKNOWN_SPREAD),
         ];
         let n = new_voxels(rows, 0.2, |_| 0.7);
         assert_eq!(n.len(), 2);
@@ -560,5 +613,11 @@ mod tests {
         assert!((a.xyz_m[0] - 0.125).abs() < 1e-12);
         assert_eq!(a.eps_l, 0.3);
         assert_eq!(a.omega_hit, 0.7);
+        // Pooled: within-row 1e-4 plus the spread of the two centroids along
+        // x (2 at -0.075, 6 at +0.025: variance 0.001875).
+        assert!((a.spread_m2[0] - (1e-4 + 0.001875)).abs() < 1e-7, "{:?}", a.spread_m2);
+        assert!((a.spread_m2[3] - 1e-4).abs() < 1e-7 && a.spread_m2[5].abs() < 1e-7);
+        let b = n.iter().find(|x| x.key != VoxelKey([0, 0, 0])).unwrap();
+        assert!(b.spread_m2.iter().all(|c| c.is_nan()), "an unknown spread stays unknown");
     }
 }

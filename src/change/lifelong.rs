@@ -7,7 +7,7 @@
 //! first session, then id) keeps its row, as the voxel that was there first.
 
 use crate::evidence::grid::{pack, packed_key, unpack};
-use crate::geometry::{Pose, VoxelKey};
+use crate::geometry::{Pose, Sym3, VoxelKey, rotate_sym, rotation_rows};
 use nalgebra::Point3;
 use rayon::prelude::*;
 use rustc_hash::FxHashMap;
@@ -80,6 +80,10 @@ pub struct MapVoxel {
     /// The voxel moves with this keyframe (index in `owner_session`).
     pub owner_session: i64,
     pub owner_keyframe: u32,
+    /// Covariance of its points about the centroid, m², from the session
+    /// that placed it (`CleanedMap::spread_m2`); `UNKNOWN_SPREAD` for voxels
+    /// stored before seam kept it.
+    pub spread_m2: Sym3,
 }
 
 /// A change a session saw at one voxel (SQLite's `change_events`).
@@ -153,6 +157,7 @@ impl LifelongMap {
                 if let Some(d) = cache[&(x.owner_session, x.owner_keyframe)] {
                     let p = d * Point3::from(x.xyz_m);
                     x.xyz_m = [p.x, p.y, p.z];
+                    x.spread_m2 = rotate_sym(&rotation_rows(&d), &x.spread_m2);
                     if let Some(k) = packed_key(&x.xyz_m, v) {
                         x.key = unpack(k);
                     }
@@ -168,6 +173,7 @@ impl LifelongMap {
 mod tests {
     use super::*;
     use nalgebra::{Translation3, UnitQuaternion};
+    use std::f64::consts::FRAC_PI_2;
 
     fn voxel(id: i64, xyz: [f64; 3], first: i64, owner: (i64, u32)) -> MapVoxel {
         MapVoxel {
@@ -183,6 +189,7 @@ mod tests {
             category_session: first,
             owner_session: owner.0,
             owner_keyframe: owner.1,
+            spread_m2: [1e-4, 0.0, 0.0, 1e-4, 0.0, 0.0],
         }
     }
 
@@ -212,5 +219,12 @@ mod tests {
         let kept = moved.voxels.iter().find(|v| v.key == VoxelKey([5, 0, 0])).unwrap();
         assert_eq!(kept.voxel_id, 1);
         assert!(moved.voxels.iter().any(|v| v.voxel_id == 3 && v.xyz_m == [5.05, 5.05, 0.05]));
+        // The spread turns with its owner: a quarter turn about z swaps x and y.
+        let turn = Pose::from_parts(Translation3::identity(), UnitQuaternion::from_euler_angles(0.0, 0.0, FRAC_PI_2));
+        let wide_x =
+            MapVoxel { spread_m2: [4e-4, 0.0, 0.0, 1e-4, 0.0, 1e-6], ..voxel(9, [9.05, 0.05, 0.05], 1, (1, 9)) };
+        let (turned, _) = LifelongMap::from_voxels(vec![wide_x], 0.2).0.moved(|_, _| Some(turn));
+        let s = turned.voxels[0].spread_m2;
+        assert!((s[0] - 1e-4).abs() < 1e-9 && (s[3] - 4e-4).abs() < 1e-9 && (s[5] - 1e-6).abs() < 1e-9, "{s:?}");
     }
 }

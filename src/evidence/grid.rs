@@ -517,7 +517,7 @@ impl InterestEvidence {
                     hit.is_some() as usize
                 })
                 .sum();
-            let (h, f) = self.apply(&marks, origin_m, keyframe, cfg);
+            let (h, f) = self.apply(&marks, origin_m, keyframe, cfg, shapes);
             out.hit_voxels = h;
             out.free_voxels = f;
             cast
@@ -527,7 +527,16 @@ impl InterestEvidence {
     }
 
     /// Pass 2: eq. 4 once per marked interest voxel and kind.
-    fn apply(&mut self, marks: &Marks, origin_m: &[f64; 3], keyframe: u32, cfg: &EvidenceConfig) -> (usize, usize) {
+    /// An earlier session's patch ([`super::surface::VoxelShape::from_map`])
+    /// is freed next to the keyframe's own hits too.
+    fn apply(
+        &mut self,
+        marks: &Marks,
+        origin_m: &[f64; 3],
+        keyframe: u32,
+        cfg: &EvidenceConfig,
+        shapes: Option<&SurfaceShapes>,
+    ) -> (usize, usize) {
         let (lo, hi) = self.x_range(&marks.b);
         let v = self.voxel_m;
         let (l_hit, l_miss, l_min, l_max) = cfg.log_odds.log_odds();
@@ -548,7 +557,9 @@ impl InterestEvidence {
                 if kinds == 0 {
                     return;
                 }
-                if kinds & FREE != 0 && (kinds & HIT != 0 || marks.hit_near(&k, guard)) {
+                let guarded =
+                    || marks.hit_near(&k, guard) && !shapes.and_then(|s| s.get(pk)).is_some_and(|s| s.from_map);
+                if kinds & FREE != 0 && (kinds & HIT != 0 || guarded()) {
                     kinds &= !FREE;
                     if kinds == 0 {
                         return;

@@ -26,9 +26,9 @@
 use super::grid::{Box3, InterestEvidence, RayStats, Row, pack, packed_key, row_of, unpack};
 use super::raycast::voxel_key;
 use super::stats::{EvidenceConfig, FreeTest};
-use super::surface::SurfaceShapes;
+use super::surface::{MapPatch, SurfaceShapes};
 use super::tables::{CleanedMap, NO_HIT_BOX, PointLabels, SubmapEvidence};
-use crate::geometry::{Pose, VoxelKey, transformed};
+use crate::geometry::{Pose, VoxelKey, rotate_sym, rotation_rows, transformed};
 use nalgebra::Point3;
 use rayon::prelude::*;
 use rustc_hash::FxHashMap;
@@ -84,12 +84,13 @@ fn origin(kf: &KeyframeInput<'_>) -> [f64; 3] {
 }
 
 /// Ray casts one session: evidence per submap, ε_l, labels of every point and
-/// the cleaned map per submap. `extra_interest` adds voxels (packed keys) to
-/// keep evidence for beyond those the session's own points occupy — the
-/// earlier sessions' maps, which change detection compares against.
+/// the cleaned map per submap. `map` adds voxels to keep evidence for beyond
+/// those the session's own points occupy — the earlier sessions' map, which
+/// change detection compares against — with the patch of points each had,
+/// which this session's rays must cross to free it (`evidence::surface`).
 pub fn generate(
     keyframes: &[KeyframeInput<'_>],
-    extra_interest: &[u64],
+    map: &[MapPatch],
     cfg: &EvidenceConfig,
     mut progress: impl FnMut(usize),
 ) -> SessionEvidence {
@@ -108,7 +109,7 @@ pub fn generate(
         })
         .collect();
     let mut submap_box = vec![Box3::EMPTY; n_submaps];
-    let mut keys: Vec<u64> = extra_interest.to_vec();
+    let mut keys: Vec<u64> = map.iter().map(|p| p.key).collect();
     for (kf, (k, b)) in keyframes.iter().zip(&per_kf) {
         submap_box[kf.submap] = submap_box[kf.submap].union(b);
         keys.extend_from_slice(k);
@@ -116,7 +117,7 @@ pub fn generate(
     drop(per_kf);
     let mut session = InterestEvidence::new(keys, v);
     let shapes = (cfg.free_test == FreeTest::Surface)
-        .then(|| SurfaceShapes::build(session.keys(), keyframes.iter().map(world_points), v, cfg));
+        .then(|| SurfaceShapes::build(session.keys(), keyframes.iter().map(world_points), v, map, cfg));
     let mut stats = GenerationStats {
         keyframes: keyframes.len(),
         points: keyframes.iter().map(|k| k.points.len()).sum(),
@@ -262,24 +263,39 @@ fn cleaned_map<'a>(
     dynamic: &[bool],
 ) -> CleanedMap {
     struct Acc {
+        /// Sums of the points' offsets from the voxel centre and of their
+        /// products (upper triangle).
         sum: [f64; 3],
+        sum_sq: [f64; 6],
         n: u32,
         eps: f32,
         cur: (u32, u32),
         best: (u32, u32),
     }
+    let v = session.voxel_m;
     let mut voxels: FxHashMap<u64, Acc> = FxHashMap::default();
     for kf in keyframes {
         for p in world_points(kf) {
-            let Some(k) = packed_key(&p, session.voxel_m) else { continue };
+            let Some(k) = packed_key(&p, v) else { continue };
             let Some(i) = session.find(k) else { continue };
             if dynamic[i] {
                 continue;
             }
-            let a =
-                voxels.entry(k).or_insert(Acc { sum: [0.0; 3], n: 0, eps: eps[i], cur: (kf.index, 0), best: (0, 0) });
-            for (s, x) in a.sum.iter_mut().zip(p) {
-                *s += x;
+            let a = voxels.entry(k).or_insert(Acc {
+                sum: [0.0; 3],
+                sum_sq: [0.0; 6],
+                n: 0,
+                eps: eps[i],
+                cur: (kf.index, 0),
+                best: (0, 0),
+            });
+            let c = unpack(k).center_m(v);
+            let [x, y, z] = [p[0] - c[0], p[1] - c[1], p[2] - c[2]];
+            for (s, d) in a.sum.iter_mut().zip([x, y, z]) {
+                *s += d;
+            }
+            for (s, d) in a.sum_sq.iter_mut().zip([x * x, x * y, x * z, y * y, y * z, z * z]) {
+                *s += d;
             }
             a.n += 1;
             // Points come keyframe by keyframe: count the current run.
@@ -295,8 +311,16 @@ fn cleaned_map<'a>(
     let mut rows: Vec<(u64, Acc)> = voxels.into_iter().collect();
     rows.sort_unstable_by_key(|(k, _)| *k);
     let mut m = CleanedMap::default();
-    for (_, a) in rows {
-        m.xyz_m.push(a.sum.map(|s| (s / a.n as f64) as f32));
+    for (k, a) in rows {
+        let n = a.n as f64;
+        let mean = a.sum.map(|s| s / n);
+        let c = unpack(k).center_m(v);
+        m.xyz_m.push([0, 1, 2].map(|i| (c[i] + mean[i]) as f32));
+        let pairs = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)];
+        m.spread_m2.push(std::array::from_fn(|j| {
+            let (p, q) = pairs[j];
+            (a.sum_sq[j] / n - mean[p] * mean[q]) as f32
+        }));
         m.eps_l.push(a.eps);
         m.points.push(a.n);
         m.owner_keyframe.push(a.best.0);
@@ -342,12 +366,7 @@ pub fn reproject(
                 let mut row = row_of(t, i);
                 let moved = cache
                     .entry(row.owner_keyframe)
-                    .or_insert_with(|| {
-                        delta_of(row.owner_keyframe).map(|d| {
-                            let r = d.rotation.to_rotation_matrix().into_inner();
-                            (d, [0, 1, 2].map(|a| [0, 1, 2].map(|b| r[(a, b)])))
-                        })
-                    })
+                    .or_insert_with(|| delta_of(row.owner_keyframe).map(|d| (d, rotation_rows(&d))))
                     .as_ref();
                 let Some((d, r)) = moved else {
                     out.extend(pack(t.keys[i]).map(|k| (k, row)));
@@ -399,28 +418,16 @@ fn moved_voxels(key: VoxelKey, hit_box_m: &[f32; 6], d: &Pose, voxel_m: f64, mut
     }
 }
 
-/// `R M Rᵀ` of a symmetric matrix kept as its upper triangle.
-fn rotate_sym(r: &[[f64; 3]; 3], m: &[f32; 6]) -> [f32; 6] {
-    let [xx, xy, xz, yy, yz, zz] = m.map(|v| v as f64);
-    let full = [[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]];
-    let mut rm = [[0.0; 3]; 3];
-    for a in 0..3 {
-        for b in 0..3 {
-            rm[a][b] = (0..3).map(|k| r[a][k] * full[k][b]).sum();
-        }
-    }
-    let e = |a: usize, b: usize| -> f32 { (0..3).map(|k| rm[a][k] * r[b][k]).sum::<f64>() as f32 };
-    [e(0, 0), e(0, 1), e(0, 2), e(1, 1), e(1, 2), e(2, 2)]
-}
-
-/// Moves a cleaned map's centroids with their owners' ΔT (eq. 11).
+/// Moves a cleaned map's centroids with their owners' ΔT (eq. 11), and turns
+/// their spread with it.
 pub fn reproject_cleaned(map: &CleanedMap, delta_of: impl Fn(u32) -> Option<Pose>) -> CleanedMap {
     let mut cache: FxHashMap<u32, Option<Pose>> = FxHashMap::default();
     let mut out = map.clone();
-    for (i, p) in out.xyz_m.iter_mut().enumerate() {
+    for (i, (p, spread)) in out.xyz_m.iter_mut().zip(out.spread_m2.iter_mut()).enumerate() {
         if let Some(d) = cache.entry(map.owner_keyframe[i]).or_insert_with(|| delta_of(map.owner_keyframe[i])) {
             let q = *d * Point3::new(p[0] as f64, p[1] as f64, p[2] as f64);
             *p = [q.x as f32, q.y as f32, q.z as f32];
+            *spread = rotate_sym(&rotation_rows(d), spread);
         }
     }
     out
@@ -611,6 +618,22 @@ mod tests {
             .sum();
         assert!(left as usize * 4 <= person_total, "{left} person points left in the cleaned map");
         assert!(out.stats.dynamic_points >= person_removed);
+        // The wall at y = 4 is a plane: its voxels' spread has no variance
+        // across it (yy, xy, yz), and along x the variance of points 0.1 m
+        // apart (every other one on a voxel boundary): never above 0.1².
+        let (mut walls, mut spread_x) = (0, 0);
+        for m in &out.cleaned {
+            for ((p, c), n) in m.xyz_m.iter().zip(&m.spread_m2).zip(&m.points) {
+                if (p[1] - 4.0).abs() < 1e-4 && p[2] > 0.5 && p[0] > -9.0 && p[0] < 20.0 {
+                    walls += 1;
+                    assert!(c[3].abs() < 1e-8 && c[1].abs() < 1e-8 && c[4].abs() < 1e-8, "{p:?} {c:?}");
+                    assert!((0.0..=0.01).contains(&c[0]), "{p:?} {c:?}");
+                    spread_x += (c[0] > 1e-4) as usize;
+                    assert!(*n > 0);
+                }
+            }
+        }
+        assert!(walls > 100 && spread_x * 4 > walls, "{spread_x} of {walls} wall voxels spread along x");
     }
 
     /// Reprojection by ΔT of the poses that generated the evidence is the

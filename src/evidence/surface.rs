@@ -52,6 +52,7 @@
 
 use super::grid::{Box3, packed_key, unpack};
 use super::stats::EvidenceConfig;
+use crate::geometry::Sym3;
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 use rayon::prelude::*;
 use rustc_hash::FxHashMap;
@@ -108,8 +109,27 @@ pub struct VoxelShape {
     /// end to count.
     pub behind_m: f32,
     /// Whether rays free it below the ground clearance too: a patch that
-    /// one keyframe saw spread in two directions (see [`SurfaceShapes::build`]).
+    /// one keyframe saw spread in two directions, or an earlier session's
+    /// (see [`SurfaceShapes::build`]).
     pub clearance_exempt: bool,
+    /// An earlier session's map voxel that none of this session's points
+    /// occupy: freed next to the keyframe's own hits too, since crossing the
+    /// patch is the whole test (the bottom of a removed pallet sits next to
+    /// the ground the same ray hits).
+    pub from_map: bool,
+}
+
+/// An earlier session's map voxel given to `session::generate`: its packed
+/// key on the current grid, and the patch its points made.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MapPatch {
+    pub key: u64,
+    /// Centroid, world frame of the current graph version.
+    pub xyz_m: [f64; 3],
+    /// Points behind the centroid (fewer than three make a ball).
+    pub points: u32,
+    /// Covariance about the centroid, m²; not finite: no patch (voxel rule).
+    pub spread_m2: Sym3,
 }
 
 fn dot(a: &[f64; 3], b: &[f64; 3]) -> f64 {
@@ -122,6 +142,15 @@ impl VoxelShape {
     fn from_moments(m: &Moments, cfg: &EvidenceConfig) -> (VoxelShape, f32) {
         let n = m.n as f64;
         let mean = m.s.map(|s| s / n);
+        let pairs = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)];
+        let cov = std::array::from_fn(|j| m.ss[j] / n - mean[pairs[j].0] * mean[pairs[j].1]);
+        VoxelShape::from_spread(mean, &cov, m.n, cfg)
+    }
+
+    /// The shape of `points` points with centroid `mean` (offset from the
+    /// voxel centre) and covariance `cov` (upper triangle), and the smaller
+    /// in-plane standard deviation (0 for a ball).
+    fn from_spread(mean: [f64; 3], cov: &[f64; 6], points: u32, cfg: &EvidenceConfig) -> (VoxelShape, f32) {
         let tol = cfg.surface_tolerance_m as f32;
         let behind = cfg.surface_behind_m as f32;
         let ball = VoxelShape {
@@ -133,22 +162,13 @@ impl VoxelShape {
             half2_m: tol,
             behind_m: behind,
             clearance_exempt: false,
+            from_map: false,
         };
-        if m.n < 3 {
+        if points < 3 {
             return (ball, 0.0);
         }
-        let c = |i: usize, a: usize, b: usize| m.ss[i] / n - mean[a] * mean[b];
-        let cov = Matrix3::new(
-            c(0, 0, 0),
-            c(1, 0, 1),
-            c(2, 0, 2),
-            c(1, 0, 1),
-            c(3, 1, 1),
-            c(4, 1, 2),
-            c(2, 0, 2),
-            c(4, 1, 2),
-            c(5, 2, 2),
-        );
+        let [xx, xy, xz, yy, yz, zz] = *cov;
+        let cov = Matrix3::new(xx, xy, xz, xy, yy, yz, xz, yz, zz);
         let eig = SymmetricEigen::new(cov);
         let mut order = [0usize, 1, 2];
         order.sort_by(|&a, &b| eig.eigenvalues[a].total_cmp(&eig.eigenvalues[b]));
@@ -219,10 +239,15 @@ impl SurfaceShapes {
     /// points of `scans` (world frame, one slice per keyframe) fall into.
     /// Keyframes are summed a few at a time, so memory stays one row per
     /// interest voxel.
+    ///
+    /// `map` gives the patches of earlier sessions' map voxels (keys among
+    /// `interest`): those none of the scans' points fall into get their
+    /// patch, marked [`VoxelShape::from_map`].
     pub fn build(
         interest: &[u64],
         scans: impl Iterator<Item = Vec<[f64; 3]>> + Send,
         voxel_m: f64,
+        map: &[MapPatch],
         cfg: &EvidenceConfig,
     ) -> SurfaceShapes {
         let mut moments = vec![Moments::default(); interest.len()];
@@ -263,7 +288,23 @@ impl SurfaceShapes {
                 }
             }
         }
-        let (keys, shapes): (Vec<u64>, Vec<VoxelShape>) = interest
+        let map_shape = |p: &MapPatch| -> Option<VoxelShape> {
+            if p.points < cfg.surface_map_min_points || !p.spread_m2.iter().all(|c| c.is_finite()) {
+                return None;
+            }
+            let c = unpack(p.key).0;
+            let mean = std::array::from_fn(|a| p.xyz_m[a] - (c[a] as f64 + 0.5) * voxel_m);
+            let cov = p.spread_m2.map(f64::from);
+            let (s, _) = VoxelShape::from_spread(mean, &cov, p.points, cfg);
+            Some(VoxelShape { clearance_exempt: true, from_map: true, ..s })
+        };
+        let map = if cfg.map_patches { map } else { &[] };
+        let from_map: Vec<(u64, VoxelShape)> = map
+            .par_iter()
+            .filter(|p| interest.binary_search(&p.key).is_ok_and(|i| moments[i].n == 0))
+            .filter_map(|p| Some((p.key, map_shape(p)?)))
+            .collect();
+        let (mut keys, mut shapes): (Vec<u64>, Vec<VoxelShape>) = interest
             .par_iter()
             .zip(moments.par_iter())
             .filter(|(_, m)| m.n > 0)
@@ -276,6 +317,12 @@ impl SurfaceShapes {
                     .then_some((k, VoxelShape { clearance_exempt: true, ..s }))
             })
             .unzip();
+        if !from_map.is_empty() {
+            let mut all: Vec<(u64, VoxelShape)> = keys.into_iter().zip(shapes).chain(from_map).collect();
+            all.par_sort_unstable_by_key(|(k, _)| *k);
+            all.dedup_by_key(|(k, _)| *k);
+            (keys, shapes) = all.into_iter().unzip();
+        }
         let mut index = FxHashMap::with_capacity_and_hasher(keys.len(), Default::default());
         index.extend(keys.iter().enumerate().map(|(i, &k)| (k, i as u32)));
         SurfaceShapes { keys, shapes, index }
@@ -424,7 +471,7 @@ mod tests {
         interest.push(packed_key(&[3.0, 3.0, 3.0], v).unwrap());
         interest.sort_unstable();
         interest.dedup();
-        let shapes = SurfaceShapes::build(&interest, [a.to_vec(), b.to_vec()].into_iter(), v, &cfg);
+        let shapes = SurfaceShapes::build(&interest, [a.to_vec(), b.to_vec()].into_iter(), v, &[], &cfg);
         assert_eq!(shapes.len(), 1, "the voxel without points has no shape");
         let k = packed_key(&pts[0], v).unwrap();
         let got = shapes.get(k).unwrap();
@@ -450,8 +497,8 @@ mod tests {
         // Two keyframes hit the tube, so its voxel has a shape; one keyframe
         // alone would leave it to the voxel rule.
         let (a, b) = pts.split_at(30);
-        let two = SurfaceShapes::build(&keys, [a.to_vec(), b.to_vec()].into_iter(), v, &cfg);
-        let one = SurfaceShapes::build(&keys, [pts.clone()].into_iter(), v, &cfg);
+        let two = SurfaceShapes::build(&keys, [a.to_vec(), b.to_vec()].into_iter(), v, &[], &cfg);
+        let one = SurfaceShapes::build(&keys, [pts.clone()].into_iter(), v, &[], &cfg);
         assert!(two.get(key).is_some() && one.get(key).is_none());
         let free_after = |shapes: Option<&SurfaceShapes>, y: f64| {
             let mut ev = InterestEvidence::new(keys.clone(), v);
@@ -479,14 +526,84 @@ mod tests {
         let mut keys: Vec<u64> = legs.iter().chain(&ring).filter_map(|p| packed_key(p, v)).collect();
         keys.sort_unstable();
         keys.dedup();
-        let shapes = SurfaceShapes::build(&keys, [legs.clone(), ring.clone()].into_iter(), v, &cfg);
+        let shapes = SurfaceShapes::build(&keys, [legs.clone(), ring.clone()].into_iter(), v, &[], &cfg);
         let leg = shapes.get(packed_key(&legs[0], v).unwrap()).expect("a patch gets a shape");
         assert!(leg.clearance_exempt);
         assert!(shapes.get(packed_key(&ring[0], v).unwrap()).is_none(), "a line keeps the voxel rule");
         // Seen through later, to the ground behind, below the clearance.
         assert!(leg.passes(unpack(packed_key(&legs[0], v).unwrap()).0, v, &[0.0, 0.1, 1.7], &[10.7, 0.1, 0.0]));
         let off = EvidenceConfig { surface_single_sigma_m: 0.0, ..cfg.clone() };
-        let none = SurfaceShapes::build(&keys, [legs, ring].into_iter(), v, &off);
+        let none = SurfaceShapes::build(&keys, [legs, ring].into_iter(), v, &[], &off);
         assert!(none.is_empty());
+    }
+
+    /// An earlier session's pallet side, 0.2-0.4 m up, that this session no
+    /// longer hits: with `map_patches` its stored patch is freed by a ray
+    /// through it to the ground behind, although that ray ends below the
+    /// clearance and its keyframe hits the ground voxel right under it; a
+    /// ray grazing the stored ground patch frees nothing. Without
+    /// `map_patches` the guard and the clearance keep both.
+    #[test]
+    fn map_patches_free_a_removed_pallet_side_but_not_the_ground() {
+        use super::super::grid::InterestEvidence;
+        let on = EvidenceConfig { map_patches: true, ..Default::default() };
+        let off = EvidenceConfig::default();
+        let v = on.voxel_size_m;
+        // Pallet side: vertical patch at x = 10.05, y 0.02-0.18, z 0.22-0.38.
+        let side: Vec<[f64; 3]> =
+            (0..25).map(|i| [10.05, 0.02 + 0.04 * (i % 5) as f64, 0.22 + 0.04 * (i / 5) as f64]).collect();
+        // Ground under and behind it, z = 0.02.
+        let ground: Vec<[f64; 3]> =
+            (0..25).map(|i| [11.82 + 0.04 * (i % 5) as f64, 0.02 + 0.04 * (i / 5) as f64, 0.02]).collect();
+        let patch = |pts: &[[f64; 3]]| {
+            let n = pts.len() as f64;
+            let mean: [f64; 3] = std::array::from_fn(|a| pts.iter().map(|p| p[a]).sum::<f64>() / n);
+            let pairs = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)];
+            let spread = std::array::from_fn(|j| {
+                let (a, b) = pairs[j];
+                (pts.iter().map(|p| (p[a] - mean[a]) * (p[b] - mean[b])).sum::<f64>() / n) as f32
+            });
+            MapPatch { key: packed_key(&mean, v).unwrap(), xyz_m: mean, points: pts.len() as u32, spread_m2: spread }
+        };
+        let under_ground: Vec<[f64; 3]> =
+            (0..25).map(|i| [10.02 + 0.04 * (i % 5) as f64, 0.02 + 0.04 * (i / 5) as f64, 0.02]).collect();
+        let map = [patch(&side), patch(&ground), patch(&under_ground)];
+        let (side_key, ground_key) = (map[0].key, map[1].key);
+        // This session's keyframe sees only the ground behind, at (12, 0.1, 0.02), through where the
+        // side was (z 0.29 at x 10.05), and the ground voxel right under the side.
+        let under = [10.05, 0.1, 0.02];
+        let end = [12.0, 0.1, 0.02];
+        let mut keys: Vec<u64> = map.iter().map(|p| p.key).collect();
+        keys.extend([under, end].iter().filter_map(|p| packed_key(p, v)));
+        keys.sort_unstable();
+        keys.dedup();
+        let origin = [0.0, 0.1, 1.7];
+        let scan = vec![under, end];
+        let freed = |cfg: &EvidenceConfig, key: u64| {
+            let shapes = SurfaceShapes::build(&keys, [scan.clone()].into_iter(), v, &map, cfg);
+            let mut ev = InterestEvidence::new(keys.clone(), v);
+            ev.add_keyframe(&origin, &scan, 3, cfg, Some(&shapes));
+            (ev.get(key).unwrap().free_n, shapes.get(key).copied())
+        };
+        let (n, shape) = freed(&on, side_key);
+        let shape = shape.expect("the side gets its stored patch");
+        assert!(shape.from_map && shape.clearance_exempt);
+        assert_eq!(n, 1, "the ray through the side to the ground behind frees it");
+        assert_eq!(freed(&off, side_key), (0, None), "guard and clearance keep it without map patches");
+        // The stored ground behind the side: a ray to (12.5, 0.1, 0.02) grazes it
+        // without crossing its plane.
+        let graze = [12.5, 0.1, 0.02];
+        let shapes = SurfaceShapes::build(&keys, [scan.clone()].into_iter(), v, &map, &on);
+        let g = shapes.get(ground_key).unwrap();
+        assert!(!g.passes(unpack(ground_key).0, v, &origin, &graze));
+        // A stored voxel this session hits does not get the stored patch (one
+        // point of one keyframe: the voxel rule), and a patch of too few
+        // points or of unknown spread gets none.
+        assert_eq!(map[2].key, packed_key(&under, v).unwrap());
+        assert!(shapes.get(map[2].key).is_none());
+        let few = EvidenceConfig { surface_map_min_points: 26, ..on.clone() };
+        assert!(SurfaceShapes::build(&keys, [scan.clone()].into_iter(), v, &map, &few).get(side_key).is_none());
+        let unknown = [MapPatch { spread_m2: crate::geometry::UNKNOWN_SPREAD, ..map[0] }];
+        assert!(SurfaceShapes::build(&keys, [scan.clone()].into_iter(), v, &unknown, &on).get(side_key).is_none());
     }
 }

@@ -7,7 +7,7 @@
 //! · A_gen⁻¹`, `i` the row's owner keyframe (MATH.md §7). Coordinates in the
 //! submap frame are `A_gen⁻¹ · x`.
 
-use crate::geometry::VoxelKey;
+use crate::geometry::{Sym3, VoxelKey};
 
 /// One kind (hit or free) of directional evidence for many voxels, as
 /// columns: `n` observing keyframes, `Q = Σ q`, `M = Σ q u uᵀ` (upper
@@ -78,6 +78,11 @@ pub struct CleanedMap {
     pub points: Vec<u32>,
     /// The keyframe (index in its session) most of those points came from.
     pub owner_keyframe: Vec<u32>,
+    /// Covariance of those points about the centroid (m², upper triangle):
+    /// the patch the points make, which later sessions' rays must cross to
+    /// see the voxel gone (`evidence::surface`). `UNKNOWN_SPREAD` in maps
+    /// written before seam kept it.
+    pub spread_m2: Vec<Sym3>,
 }
 
 impl CleanedMap {

@@ -22,6 +22,35 @@ pub fn transformed(points: &[[f32; 3]], t: &Pose) -> Vec<[f64; 3]> {
     points.iter().map(|p| (t * nalgebra::Point3::new(p[0] as f64, p[1] as f64, p[2] as f64)).into()).collect()
 }
 
+/// A symmetric 3×3 matrix kept as its upper triangle `[xx, xy, xz, yy, yz,
+/// zz]`: direction matrices `M` and the spread (covariance) of a voxel's
+/// points.
+pub type Sym3 = [f32; 6];
+
+/// The spread of a voxel's points where it is not known (cleaned maps and
+/// lifelong maps written before seam kept it).
+pub const UNKNOWN_SPREAD: Sym3 = [f32::NAN; 6];
+
+/// The rotation of `t` as rows of a matrix.
+pub fn rotation_rows(t: &Pose) -> [[f64; 3]; 3] {
+    let r = t.rotation.to_rotation_matrix().into_inner();
+    [0, 1, 2].map(|a| [0, 1, 2].map(|b| r[(a, b)]))
+}
+
+/// `R M Rᵀ` of a symmetric matrix.
+pub fn rotate_sym(r: &[[f64; 3]; 3], m: &Sym3) -> Sym3 {
+    let [xx, xy, xz, yy, yz, zz] = m.map(|v| v as f64);
+    let full = [[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]];
+    let mut rm = [[0.0; 3]; 3];
+    for a in 0..3 {
+        for b in 0..3 {
+            rm[a][b] = (0..3).map(|k| r[a][k] * full[k][b]).sum();
+        }
+    }
+    let e = |a: usize, b: usize| -> f32 { (0..3).map(|k| rm[a][k] * r[b][k]).sum::<f64>() as f32 };
+    [e(0, 0), e(0, 1), e(0, 2), e(1, 1), e(1, 2), e(2, 2)]
+}
+
 /// A single LiDAR scan in its sensor frame.
 ///
 /// `intensity` is either empty (the format had none) or as long as `points`.

@@ -83,7 +83,13 @@ pub(super) fn changes(ctx: &mut StepCtx<'_>, step: &'static str, seq: i64) -> Re
 
     let t_update = Instant::now();
     let rows = cleaned.iter().flat_map(|m| {
-        (0..m.len()).map(move |i| (m.xyz_m[i].map(|c| c as f64), m.eps_l[i], m.points[i], m.owner_keyframe[i]))
+        (0..m.len()).map(move |i| detect::CleanedRow {
+            xyz_m: m.xyz_m[i].map(|c| c as f64),
+            eps_l: m.eps_l[i],
+            points: m.points[i],
+            owner_keyframe: m.owner_keyframe[i],
+            spread_m2: m.spread_m2[i],
+        })
     });
     let new = detect::new_voxels(rows, v, |k| evidence.get(k).map_or(0.0, |r| r.evidence().hit.omega(ecfg) as f32));
     let reliability = ctx.config.change.deleted_reliability;

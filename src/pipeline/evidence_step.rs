@@ -12,7 +12,9 @@
 use super::IngestError;
 use super::steps::{StepCtx, alignment_state};
 use crate::align::maps::ScanLoader;
+use crate::evidence::grid::pack;
 use crate::evidence::session::{self, KeyframeInput, delta, reproject, reproject_cleaned};
+use crate::evidence::surface::MapPatch;
 use crate::evidence::{EvidenceModel, SubmapEvidence};
 use crate::geometry::Pose;
 use crate::store::evidence_files::{
@@ -63,12 +65,17 @@ pub(super) fn evidence(ctx: &mut StepCtx<'_>, step: &'static str, seq: i64) -> R
         })
         .collect();
     // The lifelong map's voxels, moved to this version, are kept as interest
-    // too: change detection asks whether this session saw them free.
+    // too: change detection asks whether this session saw them free, which
+    // takes a ray through the patch of points each had.
     let (map, _) = super::changes_step::placed_map(ctx.store.conn(), version, cfg.voxel_size_m)?;
-    let map_keys = map.packed_keys();
+    let map_patches: Vec<MapPatch> = map
+        .voxels
+        .iter()
+        .filter_map(|v| Some(MapPatch { key: pack(v.key)?, xyz_m: v.xyz_m, points: v.points, spread_m2: v.spread_m2 }))
+        .collect();
     drop(map);
     ctx.progress.begin("ray cast", inputs.len() as u64);
-    let out = session::generate(&inputs, &map_keys, cfg, |_| ctx.progress.advance(1));
+    let out = session::generate(&inputs, &map_patches, cfg, |_| ctx.progress.advance(1));
     ctx.progress.end();
     drop(inputs);
     drop(scans);
@@ -140,7 +147,7 @@ pub(super) fn evidence(ctx: &mut StepCtx<'_>, step: &'static str, seq: i64) -> R
         "points": st.points,
         "dynamic_points": st.dynamic_points,
         "interest_voxels": st.interest_voxels,
-        "map_interest_voxels": map_keys.len(),
+        "map_interest_voxels": map_patches.len(),
         "generated_voxels": st.generated_voxels,
         "dynamic_voxels": st.dynamic_voxels,
         "cleaned_voxels": st.cleaned_voxels,

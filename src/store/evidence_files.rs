@@ -24,7 +24,7 @@
 use super::files::{HashingWriter, publish};
 use super::{FileRecord, SessionId, Store, StoreError, sql};
 use crate::evidence::{CleanedMap, PointLabels, StatsColumns, SubmapEvidence};
-use crate::geometry::VoxelKey;
+use crate::geometry::{UNKNOWN_SPREAD, VoxelKey};
 use arrow_array::{Array, ArrayRef, BooleanArray, Float32Array, Int32Array, RecordBatch};
 use arrow_schema::{DataType, Field, Schema, SchemaRef};
 use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
@@ -179,14 +179,25 @@ pub fn submap_evidence_schema() -> SchemaRef {
 
 /// Columns of a `cleaned_map` file.
 pub fn cleaned_map_schema() -> SchemaRef {
-    Arc::new(Schema::new(vec![
-        field("x_m", DataType::Float32),
-        field("y_m", DataType::Float32),
-        field("z_m", DataType::Float32),
-        field("eps_l", DataType::Float32),
-        field("points", DataType::Int32),
-        field("owner_keyframe", DataType::Int32),
-    ]))
+    Arc::new(Schema::new(
+        [
+            field("x_m", DataType::Float32),
+            field("y_m", DataType::Float32),
+            field("z_m", DataType::Float32),
+            field("eps_l", DataType::Float32),
+            field("points", DataType::Int32),
+            field("owner_keyframe", DataType::Int32),
+        ]
+        .into_iter()
+        .chain(M_SUFFIXES.iter().map(|s| field(format!("spread_{s}_m2"), DataType::Float32)))
+        .collect::<Vec<_>>(),
+    ))
+}
+
+/// The cleaned map's columns files written before seam kept the points'
+/// spread lack: read as `UNKNOWN_SPREAD`.
+fn spread_columns() -> Vec<String> {
+    M_SUFFIXES.iter().map(|s| format!("spread_{s}_m2")).collect()
 }
 
 /// Columns of a `point_labels` file, which is also the export format.
@@ -279,12 +290,14 @@ pub fn cleaned_map_batch(path: &Path, map: &CleanedMap) -> Result<RecordBatch, S
             ("eps_l", map.eps_l.len()),
             ("points", map.points.len()),
             ("owner_keyframe", map.owner_keyframe.len()),
+            ("spread_m2", map.spread_m2.len()),
         ],
     )?;
     let mut cols: Vec<ArrayRef> = (0..3).map(|i| f32_col(map.xyz_m.iter().map(|p| p[i]))).collect();
     cols.push(f32_col(map.eps_l.iter().copied()));
     cols.push(u32_col(path, "points", &map.points)?);
     cols.push(u32_col(path, "owner_keyframe", &map.owner_keyframe)?);
+    cols.extend((0..6).map(|i| f32_col(map.spread_m2.iter().map(|c| c[i]))));
     batch(path, cleaned_map_schema(), cols)
 }
 
@@ -356,7 +369,13 @@ impl Table {
     /// with the expected type. A reader panic on a damaged file is turned
     /// into an error too: a corrupt file must never take the process down.
     fn read(path: &Path, schema: &Schema) -> Result<Table, StoreError> {
-        let run = std::panic::AssertUnwindSafe(|| Table::read_inner(path, schema));
+        Table::read_with_optional(path, schema, &[])
+    }
+
+    /// As [`Table::read`], but the columns named in `optional` may be
+    /// missing ([`Table::has`] tells).
+    fn read_with_optional(path: &Path, schema: &Schema, optional: &[String]) -> Result<Table, StoreError> {
+        let run = std::panic::AssertUnwindSafe(|| Table::read_inner(path, schema, optional));
         std::panic::catch_unwind(run).unwrap_or_else(|panic| {
             let what = panic
                 .downcast_ref::<String>()
@@ -367,7 +386,7 @@ impl Table {
         })
     }
 
-    fn read_inner(path: &Path, schema: &Schema) -> Result<Table, StoreError> {
+    fn read_inner(path: &Path, schema: &Schema, optional: &[String]) -> Result<Table, StoreError> {
         let perr = |m: String| StoreError::Parquet { path: path.to_path_buf(), message: m };
         let file = File::open(path).map_err(|e| StoreError::io(path, e))?;
         let builder = ParquetRecordBatchReaderBuilder::try_new(file).map_err(|e| perr(e.to_string()))?;
@@ -375,6 +394,9 @@ impl Table {
         let mut roots = Vec::with_capacity(schema.fields().len());
         for f in schema.fields() {
             let Ok(i) = file_schema.index_of(f.name()) else {
+                if optional.contains(f.name()) {
+                    continue;
+                }
                 let have: Vec<&str> = file_schema.fields().iter().map(|f| f.name().as_str()).collect();
                 return Err(perr(format!("no column {:?} (the file has {})", f.name(), have.join(", "))));
             };
@@ -417,6 +439,11 @@ impl Table {
             return Err(self.err(format!("column {name:?} has {} values, the other columns {}", out.len(), self.rows)));
         }
         Ok(out)
+    }
+
+    /// Whether the file has column `name` (an optional one may be missing).
+    fn has(&self, name: &str) -> bool {
+        self.batches.first().is_some_and(|b| b.column_by_name(name).is_some())
     }
 
     fn f32s(&self, name: &str) -> Result<Vec<f32>, StoreError> {
@@ -468,9 +495,17 @@ pub fn read_submap_evidence(path: &Path) -> Result<SubmapEvidence, StoreError> {
 
 /// Reads a `cleaned_map` file back.
 pub fn read_cleaned_map(path: &Path) -> Result<CleanedMap, StoreError> {
-    let t = Table::read(path, &cleaned_map_schema())?;
+    let spread = spread_columns();
+    let t = Table::read_with_optional(path, &cleaned_map_schema(), &spread)?;
     let (x, y, z) = (t.f32s("x_m")?, t.f32s("y_m")?, t.f32s("z_m")?);
+    let spread_m2 = if spread.iter().all(|c| t.has(c)) {
+        let parts: Vec<Vec<f32>> = spread.iter().map(|c| t.f32s(c)).collect::<Result<_, _>>()?;
+        (0..t.rows).map(|r| std::array::from_fn(|i| parts[i][r])).collect()
+    } else {
+        vec![UNKNOWN_SPREAD; t.rows]
+    };
     Ok(CleanedMap {
+        spread_m2,
         xyz_m: (0..t.rows).map(|r| [x[r], y[r], z[r]]).collect(),
         eps_l: t.f32s("eps_l")?,
         points: t.u32s("points")?,
@@ -555,6 +590,7 @@ mod tests {
             eps_l: (0..n).map(|i| 0.1 + (i % 10) as f32 * 0.09).collect(),
             points: (0..n as u32).map(|i| i + 1).collect(),
             owner_keyframe: (0..n as u32).map(|i| i / 3).collect(),
+            spread_m2: (0..n).map(|i| [1e-4 * i as f32, -2e-5, 3e-6, 4e-4, 0.0, 1e-6]).collect(),
         }
     }
 
@@ -614,6 +650,53 @@ mod tests {
             assert_record(&s, &rec, "cleaned_map", n);
             assert_eq!(read_cleaned_map(&s.path_of(&rel)).unwrap(), m);
         }
+    }
+
+    /// A cleaned map written before seam kept the points' spread reads with
+    /// the spread unknown, and the rest as written.
+    #[test]
+    fn cleaned_map_without_spread_columns_reads_as_unknown_spread() {
+        let dir = tempfile::tempdir().unwrap();
+        let s = store(&dir);
+        let old = Arc::new(Schema::new(cleaned_map_schema().fields()[..6].to_vec()));
+        let b = RecordBatch::try_new(
+            old,
+            vec![
+                f32_col([1.0, 2.0]),
+                f32_col([0.0, 0.5]),
+                f32_col([3.0, 3.0]),
+                f32_col([0.1, 0.9]),
+                i32_col([4, 7]),
+                i32_col([0, 2]),
+            ],
+        )
+        .unwrap();
+        write_table(&s, "data/old.parquet", "cleaned_map", &b).unwrap();
+        let m = read_cleaned_map(&s.path_of("data/old.parquet")).unwrap();
+        assert_eq!((m.xyz_m[1], m.points.clone(), m.owner_keyframe.clone()), ([2.0, 0.5, 3.0], vec![4, 7], vec![0, 2]));
+        assert_eq!(m.spread_m2.len(), 2);
+        assert!(m.spread_m2.iter().flatten().all(|c| c.is_nan()));
+        // Some spread columns but not all is damage, not an old file: still
+        // read as unknown rather than half a matrix.
+        let mut fields = cleaned_map_schema().fields()[..7].to_vec();
+        fields.truncate(7);
+        let partial = Arc::new(Schema::new(fields));
+        let b = RecordBatch::try_new(
+            partial,
+            vec![
+                f32_col([1.0]),
+                f32_col([0.0]),
+                f32_col([3.0]),
+                f32_col([0.1]),
+                i32_col([4]),
+                i32_col([0]),
+                f32_col([0.2]),
+            ],
+        )
+        .unwrap();
+        write_table(&s, "data/part.parquet", "cleaned_map", &b).unwrap();
+        let m = read_cleaned_map(&s.path_of("data/part.parquet")).unwrap();
+        assert!(m.spread_m2[0].iter().all(|c| c.is_nan()));
     }
 
     #[test]
@@ -713,7 +796,7 @@ mod tests {
         assert!(err.contains("column \"keyframe\" is Float32, expected Int32"), "{err}");
 
         // Negative counts are refused on read; too-large ones on write.
-        let schema = cleaned_map_schema();
+        let schema = Arc::new(Schema::new(cleaned_map_schema().fields()[..6].to_vec()));
         let b = RecordBatch::try_new(
             schema,
             vec![f32_col([0.0]), f32_col([0.0]), f32_col([0.0]), f32_col([0.5]), i32_col([-3]), i32_col([0])],

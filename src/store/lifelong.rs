@@ -14,7 +14,7 @@
 use super::rows::e;
 use super::{SessionId, StoreError};
 use crate::change::{Category, ChangeEvent, LifelongMap, MapVoxel, SessionChanges};
-use crate::geometry::VoxelKey;
+use crate::geometry::{Sym3, UNKNOWN_SPREAD, VoxelKey};
 use rusqlite::{Connection, OptionalExtension, params};
 
 /// Edge of the fixed world tiles of the spatial index, metres.
@@ -83,7 +83,21 @@ pub fn map_state(conn: &Connection) -> Result<Option<MapState>, StoreError> {
 }
 
 const VOXEL_COLUMNS: &str = "voxel_id, kx, ky, kz, x_m, y_m, z_m, eps_g, eps_l, points, first_session, \
-     last_seen_session, category, category_session, owner_session, owner_keyframe";
+     last_seen_session, category, category_session, owner_session, owner_keyframe, spread_m2";
+
+/// `spread_m2` as stored: six little-endian float32, or NULL.
+fn spread_to_blob(s: &Sym3) -> Option<Vec<u8>> {
+    s.iter().all(|c| c.is_finite()).then(|| s.iter().flat_map(|c| c.to_le_bytes()).collect())
+}
+
+fn spread_from_blob(b: Option<Vec<u8>>) -> Sym3 {
+    match b {
+        Some(b) if b.len() == 24 => {
+            std::array::from_fn(|i| f32::from_le_bytes([b[4 * i], b[4 * i + 1], b[4 * i + 2], b[4 * i + 3]]))
+        }
+        _ => UNKNOWN_SPREAD,
+    }
+}
 
 fn voxel_row(r: &rusqlite::Row<'_>) -> rusqlite::Result<(MapVoxel, String)> {
     Ok((
@@ -100,6 +114,7 @@ fn voxel_row(r: &rusqlite::Row<'_>) -> rusqlite::Result<(MapVoxel, String)> {
             category_session: r.get(13)?,
             owner_session: r.get(14)?,
             owner_keyframe: r.get(15)?,
+            spread_m2: spread_from_blob(r.get(16)?),
         },
         r.get(12)?,
     ))
@@ -154,7 +169,7 @@ pub fn replace_lifelong_map(
     let mut ins = conn
         .prepare(&format!(
             "INSERT INTO map_voxels({VOXEL_COLUMNS}, tile)
-             VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, ?14, ?15, ?16, ?17)"
+             VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, ?14, ?15, ?16, ?17, ?18)"
         ))
         .map_err(e(conn))?;
     let v = map.voxel_m;
@@ -182,6 +197,7 @@ pub fn replace_lifelong_map(
             x.category_session,
             x.owner_session,
             x.owner_keyframe,
+            spread_to_blob(&x.spread_m2),
             tile,
         ])
         .map_err(e(conn))?;
