@@ -29,7 +29,7 @@
 
 use super::lifelong::{Category, ChangeEvent, LifelongMap, MapVoxel};
 use crate::evidence::grid::{pack, unpack};
-use crate::geometry::{Sym3, UNKNOWN_SPREAD, VoxelKey};
+use crate::geometry::{SYM3_PAIRS, Sym3, UNKNOWN_SPREAD, VoxelKey};
 use crate::registration::kdtree::{KdTree, to_f32};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -414,7 +414,6 @@ pub fn new_voxels(
         sum: [f64; 3],
         sum_sq: [f64; 6],
     }
-    const PAIRS: [(usize, usize); 6] = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)];
     let mut by_key: rustc_hash::FxHashMap<u64, Acc> = rustc_hash::FxHashMap::default();
     for r in rows {
         let Some(k) = crate::evidence::grid::packed_key(&r.xyz_m, voxel_m) else { continue };
@@ -436,7 +435,7 @@ pub fn new_voxels(
         for a in 0..3 {
             e.sum[a] += w * r.xyz_m[a];
         }
-        for (j, (p, q)) in PAIRS.into_iter().enumerate() {
+        for (j, (p, q)) in SYM3_PAIRS.into_iter().enumerate() {
             e.sum_sq[j] += w * (r.spread_m2[j] as f64 + r.xyz_m[p] * r.xyz_m[q]);
         }
         if r.points > e.best {
@@ -452,8 +451,9 @@ pub fn new_voxels(
             let mut n = e.voxel;
             let total = n.points.max(1) as f64;
             n.xyz_m = e.sum.map(|s| s / total);
-            n.spread_m2 =
-                std::array::from_fn(|j| (e.sum_sq[j] / total - n.xyz_m[PAIRS[j].0] * n.xyz_m[PAIRS[j].1]) as f32);
+            n.spread_m2 = std::array::from_fn(|j| {
+                (e.sum_sq[j] / total - n.xyz_m[SYM3_PAIRS[j].0] * n.xyz_m[SYM3_PAIRS[j].1]) as f32
+            });
             n.omega_hit = omega_hit_at(k);
             (k, n)
         })

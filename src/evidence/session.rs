@@ -26,7 +26,7 @@
 use super::grid::{Box3, InterestEvidence, RayStats, Row, pack, packed_key, row_of, unpack};
 use super::raycast::voxel_key;
 use super::stats::{EvidenceConfig, FreeTest};
-use super::surface::{MapPatch, SurfaceShapes};
+use super::surface::{MapPatch, Moments, SurfaceShapes};
 use super::tables::{CleanedMap, NO_HIT_BOX, PointLabels, SubmapEvidence};
 use crate::geometry::{Pose, VoxelKey, rotate_sym, rotation_rows, transformed};
 use nalgebra::Point3;
@@ -263,11 +263,8 @@ fn cleaned_map<'a>(
     dynamic: &[bool],
 ) -> CleanedMap {
     struct Acc {
-        /// Sums of the points' offsets from the voxel centre and of their
-        /// products (upper triangle).
-        sum: [f64; 3],
-        sum_sq: [f64; 6],
-        n: u32,
+        /// The points, as offsets from the voxel centre.
+        moments: Moments,
         eps: f32,
         cur: (u32, u32),
         best: (u32, u32),
@@ -282,22 +279,13 @@ fn cleaned_map<'a>(
                 continue;
             }
             let a = voxels.entry(k).or_insert(Acc {
-                sum: [0.0; 3],
-                sum_sq: [0.0; 6],
-                n: 0,
+                moments: Moments::default(),
                 eps: eps[i],
                 cur: (kf.index, 0),
                 best: (0, 0),
             });
             let c = unpack(k).center_m(v);
-            let [x, y, z] = [p[0] - c[0], p[1] - c[1], p[2] - c[2]];
-            for (s, d) in a.sum.iter_mut().zip([x, y, z]) {
-                *s += d;
-            }
-            for (s, d) in a.sum_sq.iter_mut().zip([x * x, x * y, x * z, y * y, y * z, z * z]) {
-                *s += d;
-            }
-            a.n += 1;
+            a.moments.add([p[0] - c[0], p[1] - c[1], p[2] - c[2]]);
             // Points come keyframe by keyframe: count the current run.
             if a.cur.0 != kf.index {
                 a.cur = (kf.index, 0);
@@ -312,17 +300,12 @@ fn cleaned_map<'a>(
     rows.sort_unstable_by_key(|(k, _)| *k);
     let mut m = CleanedMap::default();
     for (k, a) in rows {
-        let n = a.n as f64;
-        let mean = a.sum.map(|s| s / n);
+        let (mean, spread) = a.moments.mean_and_spread();
         let c = unpack(k).center_m(v);
         m.xyz_m.push([0, 1, 2].map(|i| (c[i] + mean[i]) as f32));
-        let pairs = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)];
-        m.spread_m2.push(std::array::from_fn(|j| {
-            let (p, q) = pairs[j];
-            (a.sum_sq[j] / n - mean[p] * mean[q]) as f32
-        }));
+        m.spread_m2.push(spread.map(|x| x as f32));
         m.eps_l.push(a.eps);
-        m.points.push(a.n);
+        m.points.push(a.moments.count());
         m.owner_keyframe.push(a.best.0);
     }
     m

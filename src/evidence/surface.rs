@@ -52,14 +52,14 @@
 
 use super::grid::{Box3, packed_key, unpack};
 use super::stats::EvidenceConfig;
-use crate::geometry::Sym3;
+use crate::geometry::{SYM3_PAIRS, Sym3};
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 use rayon::prelude::*;
 use rustc_hash::FxHashMap;
 
 /// Sums of one voxel's points, as offsets from the voxel centre.
 #[derive(Debug, Clone, Copy, Default)]
-struct Moments {
+pub(super) struct Moments {
     /// Keyframes whose points fell in the voxel.
     keyframes: u32,
     n: u32,
@@ -68,7 +68,7 @@ struct Moments {
 }
 
 impl Moments {
-    fn add(&mut self, d: [f64; 3]) {
+    pub(super) fn add(&mut self, d: [f64; 3]) {
         self.n += 1;
         for (s, x) in self.s.iter_mut().zip(d) {
             *s += x;
@@ -88,6 +88,19 @@ impl Moments {
         for (m, p) in self.ss.iter_mut().zip(o.ss) {
             *m += p;
         }
+    }
+
+    /// Points summed.
+    pub(super) fn count(&self) -> u32 {
+        self.n
+    }
+
+    /// The points' mean offset and their covariance about it (upper
+    /// triangle); call with at least one point.
+    pub(super) fn mean_and_spread(&self) -> ([f64; 3], [f64; 6]) {
+        let n = self.n as f64;
+        let mean = self.s.map(|s| s / n);
+        (mean, std::array::from_fn(|j| self.ss[j] / n - mean[SYM3_PAIRS[j].0] * mean[SYM3_PAIRS[j].1]))
     }
 }
 
@@ -140,10 +153,7 @@ impl VoxelShape {
     /// The shape of a voxel's points, and the smaller standard deviation of
     /// the two in its plane (0 for a ball).
     fn from_moments(m: &Moments, cfg: &EvidenceConfig) -> (VoxelShape, f32) {
-        let n = m.n as f64;
-        let mean = m.s.map(|s| s / n);
-        let pairs = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)];
-        let cov = std::array::from_fn(|j| m.ss[j] / n - mean[pairs[j].0] * mean[pairs[j].1]);
+        let (mean, cov) = m.mean_and_spread();
         VoxelShape::from_spread(mean, &cov, m.n, cfg)
     }
 

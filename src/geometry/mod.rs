@@ -27,6 +27,9 @@ pub fn transformed(points: &[[f32; 3]], t: &Pose) -> Vec<[f64; 3]> {
 /// points.
 pub type Sym3 = [f32; 6];
 
+/// The (row, column) of each entry of a [`Sym3`].
+pub const SYM3_PAIRS: [(usize, usize); 6] = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)];
+
 /// The spread of a voxel's points where it is not known (cleaned maps and
 /// lifelong maps written before seam kept it).
 pub const UNKNOWN_SPREAD: Sym3 = [f32::NAN; 6];

@@ -678,8 +678,7 @@ mod tests {
         assert!(m.spread_m2.iter().flatten().all(|c| c.is_nan()));
         // Some spread columns but not all is damage, not an old file: still
         // read as unknown rather than half a matrix.
-        let mut fields = cleaned_map_schema().fields()[..7].to_vec();
-        fields.truncate(7);
+        let fields = cleaned_map_schema().fields()[..7].to_vec();
         let partial = Arc::new(Schema::new(fields));
         let b = RecordBatch::try_new(
             partial,
