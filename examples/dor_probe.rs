@@ -96,7 +96,7 @@ fn run() -> Result<(), String> {
             })
             .collect();
         let t = Instant::now();
-        let out = generate(&inputs, &[], &cfg, |_| {});
+        let out = generate(&inputs, &[], None, &cfg, |_| {});
         let secs = t.elapsed().as_secs_f64();
         let mut acc = DorAccumulator::new(0.2);
         let mut row = 0;

@@ -7,7 +7,7 @@
 //! |---|---|---|
 //! | in L, an N voxel within τ_c | coexist | `B(ε_g, ε_l)` |
 //! | in N only, an L voxel within τ_c | coexist (joins the map) | `B(ε_g of that L voxel, ε_l)` |
-//! | in L only, new session freed it (`n_free > 0`) | deleted, overlap | `B(ε_g, ½ + ½w)`, `w` from ω_free ([`DeletedReliability`]) |
+//! | in L only, new session freed it (`n_free > 0`) | deleted, overlap | `B(ε_g, ½ + ½w)`, `w` from ω_free and support ([`ChangeConfig::deleted_weight`]) |
 //! | in L only, not freed | deleted, non-overlap | unchanged |
 //! | in N only, a coexist voxel within τ_o | emerged, overlap | `η (2 − ω_hit) ε_l` |
 //! | in N only, none | emerged, non-overlap | `ε_l` |
@@ -86,6 +86,8 @@ pub struct ChangeConfig {
 /// ATE 41-187 mm) the default keeps 99.80 % (HDL-64E), 99.77 % (HDL-32E),
 /// 99.69 % (VLP-16) and 99.28 % (Avia) of permanent structure and leaves
 /// 38.7, 45.5, 46.5 and 77.5 % of removed objects' voxels static.
+/// Beams that returned nothing add support of their own on top of this
+/// ([`ChangeConfig::deleted_weight`], `evidence::no_return`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum DeletedReliability {
@@ -110,6 +112,21 @@ impl DeletedReliability {
             DeletedReliability::OmegaOrHalfSupport => omega_free.max(support / 2.0),
             DeletedReliability::OmegaOrSupport => omega_free.max(support),
         }
+    }
+}
+
+impl ChangeConfig {
+    /// `w` of a deleted-with-overlap voxel the new session freed from
+    /// `free_n` keyframes, `no_return_n` of them by beams that returned
+    /// nothing (`evidence::no_return`). Those saw a whole window of
+    /// directions around the voxel empty, not a ray passing beside what it
+    /// held, so their support counts in full whatever `deleted_reliability`:
+    /// `w = max(reliability(ω_free, s(free_n)), s(no_return_n))`,
+    /// `s(n) = min(n, free_support_keyframes) / free_support_keyframes`.
+    pub fn deleted_weight(&self, omega_free: f64, free_n: u32, no_return_n: u32) -> f64 {
+        let n_sat = self.free_support_keyframes.max(1);
+        let support = |n: u32| n.min(n_sat) as f64 / n_sat as f64;
+        self.deleted_reliability.of(omega_free, support(free_n)).max(support(no_return_n))
     }
 }
 
@@ -510,6 +527,20 @@ mod tests {
         // Unreliable free evidence leaves ε_g alone; reliable evidence removes.
         assert!((bayes(0.3, deleted_factor(0.0)) - 0.3).abs() < 1e-12);
         assert!(bayes(0.1, deleted_factor(1.0)) > 0.99);
+    }
+
+    #[test]
+    fn no_return_support_counts_in_full() {
+        let c = ChangeConfig::default();
+        // Five keyframes of ordinary free evidence from one direction: half support.
+        assert_eq!(c.deleted_weight(0.2, 5, 0), 0.5);
+        // The same five from beams that returned nothing: full support,
+        // enough for one session to take the voxel out of the static map.
+        assert_eq!(c.deleted_weight(0.2, 5, 5), 1.0);
+        assert_eq!(c.deleted_weight(0.2, 5, 2), 0.5);
+        assert_eq!(c.deleted_weight(0.9, 5, 2), 0.9);
+        assert!(bayes(0.1, deleted_factor(c.deleted_weight(0.2, 5, 5) as f32)) >= c.static_threshold);
+        assert!(bayes(0.1, deleted_factor(c.deleted_weight(0.2, 5, 0) as f32)) < c.static_threshold);
     }
 
     #[test]

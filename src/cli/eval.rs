@@ -303,6 +303,14 @@ fn print_changes(r: &ChangesReport) {
         .map(|c| format!("{} {} ({} static)", c.class, thousands(c.voxels), thousands(c.static_voxels)))
         .collect();
     println!("permanent voxels by class (largest): {}", classes.join(", "));
+    let left: Vec<String> = s
+        .removed_by_class
+        .iter()
+        .filter(|c| c.static_voxels > 0)
+        .take(8)
+        .map(|c| format!("{} {} of {}", c.class, thousands(c.static_voxels), thousands(c.voxels)))
+        .collect();
+    println!("removed-object voxels left static by class (most): {}", left.join(", "));
     let unseen = s.appeared.iter().filter(|a| !a.seen).count();
     println!(
         "{} removed, {} appeared objects ({unseen} not seen in the map); {} object changes unscored (fewer than {} \

@@ -285,6 +285,8 @@ pub struct ChangeScores {
     /// 2, among the voxels some session saw free (`deleted_overlap`): what
     /// remains when the sessions' coverage is left out.
     pub removed_static_seen_free: Fraction,
+    /// 2: removed objects' voxels by class, most left static first.
+    pub removed_by_class: Vec<ClassCount>,
     /// 2: removed objects' voxels by category.
     pub removed_by_category: Vec<CategoryCount>,
     pub removed_objects: usize,
@@ -468,6 +470,8 @@ struct Acc {
     mover: [u64; 2],
     /// Per object: [voxels, static] of its region against `first`.
     appeared_by_object: FxHashMap<u32, [u64; 2]>,
+    /// Per removed object (the lowest index a voxel is of): [voxels, static].
+    removed_by_object: FxHashMap<u32, [u64; 2]>,
     /// Per case: region voxels that decide whether it is scored.
     case_voxels: Vec<u64>,
 }
@@ -500,10 +504,14 @@ impl Acc {
             e[0] += v[0];
             e[1] += v[1];
         }
-        for (k, v) in o.appeared_by_object {
-            let e = self.appeared_by_object.entry(k).or_default();
-            e[0] += v[0];
-            e[1] += v[1];
+        for (mine, theirs) in
+            [(&mut self.appeared_by_object, o.appeared_by_object), (&mut self.removed_by_object, o.removed_by_object)]
+        {
+            for (k, v) in theirs {
+                let e = mine.entry(k).or_default();
+                e[0] += v[0];
+                e[1] += v[1];
+            }
         }
         if self.case_voxels.len() < o.case_voxels.len() {
             self.case_voxels.resize(o.case_voxels.len(), 0);
@@ -513,6 +521,14 @@ impl Acc {
         }
         self
     }
+}
+
+/// Per-class counts, most voxels first.
+fn class_counts(classes: BTreeMap<&str, [u64; 2]>) -> Vec<ClassCount> {
+    let mut out: Vec<ClassCount> =
+        classes.into_iter().map(|(c, n)| ClassCount { class: c.into(), voxels: n[0], static_voxels: n[1] }).collect();
+    out.sort_by(|a, b| b.voxels.cmp(&a.voxels).then_with(|| a.class.cmp(&b.class)));
+    out
 }
 
 /// The five metrics for a map holding simulator sessions `sessions` (in
@@ -579,9 +595,14 @@ pub fn score(
                     e[0] += 1;
                     e[1] += s;
                 }
-                if l.of.iter().any(|&o| removed_final[o as usize]) && scene.free_of_present(&l, last) {
+                if let Some(&o) = l.of.iter().find(|&&o| removed_final[o as usize])
+                    && scene.free_of_present(&l, last)
+                {
                     acc.removed[0] += 1;
                     acc.removed[1] += s;
+                    let e = acc.removed_by_object.entry(o).or_default();
+                    e[0] += 1;
+                    e[1] += s;
                     let c = &mut acc.removed_categories[category_index(v.category)];
                     c[0] += 1;
                     c[1] += s;
@@ -710,9 +731,15 @@ pub fn score(
         e[0] += n[0];
         e[1] += n[1];
     }
-    let mut permanent_by_class: Vec<ClassCount> =
-        classes.into_iter().map(|(c, n)| ClassCount { class: c.into(), voxels: n[0], static_voxels: n[1] }).collect();
-    permanent_by_class.sort_by(|a, b| b.voxels.cmp(&a.voxels).then_with(|| a.class.cmp(&b.class)));
+    let permanent_by_class = class_counts(classes);
+    let mut classes: BTreeMap<&str, [u64; 2]> = BTreeMap::new();
+    for (&o, n) in &acc.removed_by_object {
+        let e = classes.entry(objects[o as usize].class.as_str()).or_default();
+        e[0] += n[0];
+        e[1] += n[1];
+    }
+    let mut removed_by_class = class_counts(classes);
+    removed_by_class.sort_by(|a, b| b.static_voxels.cmp(&a.static_voxels).then_with(|| a.class.cmp(&b.class)));
     ChangeScores {
         sessions: sessions.to_vec(),
         lifelong_voxels: acc.total,
@@ -727,6 +754,7 @@ pub fn score(
         removed_static_seen_free: Fraction::new(acc.removed_seen_free[1], acc.removed_seen_free[0]),
         permanent_by_category: by_category(&acc.permanent_categories),
         permanent_by_class,
+        removed_by_class,
         removed_by_category: by_category(&acc.removed_categories),
         removed_objects: removed_final.iter().filter(|&&r| r).count(),
         appeared_present: Fraction::new(appeared.iter().filter(|a| a.present).count() as u64, seen),
@@ -1151,6 +1179,8 @@ mod tests {
         assert_eq!(s.removed_static_seen_free, Fraction::new(0, 3));
         let c = &s.removed_by_category;
         assert_eq!((c.len(), c[0].category.as_str(), c[0].voxels, c[0].static_voxels), (1, "coexist", gone, 1));
+        let k = &s.removed_by_class;
+        assert_eq!((k.len(), k[0].class.as_str(), k[0].voxels, k[0].static_voxels), (1, "container", gone, 1));
     }
 
     /// An appeared object is present with half its voxels static and seen

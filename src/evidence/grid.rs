@@ -14,11 +14,15 @@
 //!    threads meet through atomic `or`s, which commute, so the order rays are
 //!    cast in does not matter (rays run in parallel);
 //! 2. walk the interest voxels inside the box (in parallel: each row is
-//!    written by one thread) and add eq. 4's `q`, `q u uᵀ` once per kind.
+//!    written by one thread) and add eq. 4's `q`, `q u uᵀ` once per kind;
+//! 3. with a no-return image (`evidence::no_return`), free the candidate
+//!    map voxels whose direction returned nothing, once, whatever else
+//!    freed them (pass 2 leaves those rows alone).
 //!
 //! The bitmap's pages are zeroed lazily by the OS (`Box::new_zeroed_slice`),
 //! so a keyframe only pays for the pages its rays touch.
 
+use super::no_return::NoReturn;
 use super::raycast::{cast_ray, voxel_key};
 use super::stats::{DirectionalStats, EvidenceConfig, EvidenceModel, VoxelEvidence};
 use super::surface::SurfaceShapes;
@@ -269,7 +273,7 @@ fn zeroed_atomics(n: usize) -> Box<[AtomicU64]> {
     }
 }
 
-/// One voxel's running evidence while keyframes are added (72 bytes).
+/// One voxel's running evidence while keyframes are added (76 bytes).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct Row {
     pub hit_n: u32,
@@ -280,6 +284,9 @@ pub struct Row {
     pub free_m: [f32; 6],
     pub owner_keyframe: u32,
     pub owner_q: f32,
+    /// Keyframes whose beams that returned nothing freed it (counted in
+    /// `free_n` too; [`super::no_return`]).
+    pub no_return_n: u32,
 }
 
 impl Row {
@@ -300,6 +307,7 @@ impl Row {
         self.free_n += o.free_n;
         self.hit_q += o.hit_q;
         self.free_q += o.free_q;
+        self.no_return_n += o.no_return_n;
         for a in 0..6 {
             self.hit_m[a] += o.hit_m[a];
             self.free_m[a] += o.free_m[a];
@@ -353,6 +361,8 @@ pub struct RayStats {
     pub skipped_rays: usize,
     pub hit_voxels: usize,
     pub free_voxels: usize,
+    /// Voxels freed by beams that returned nothing ([`super::no_return`]).
+    pub no_return_voxels: usize,
 }
 
 impl std::ops::AddAssign for RayStats {
@@ -361,6 +371,7 @@ impl std::ops::AddAssign for RayStats {
         self.skipped_rays += o.skipped_rays;
         self.hit_voxels += o.hit_voxels;
         self.free_voxels += o.free_voxels;
+        self.no_return_voxels += o.no_return_voxels;
     }
 }
 
@@ -473,12 +484,32 @@ impl InterestEvidence {
         cfg: &EvidenceConfig,
         shapes: Option<&SurfaceShapes>,
     ) -> RayStats {
+        self.add_keyframe_seeing(origin_m, points_m, keyframe, cfg, shapes, None)
+    }
+
+    /// [`Self::add_keyframe`], and with `no_return` the candidate voxels the
+    /// keyframe's beams that returned nothing pass through are freed too
+    /// (once per keyframe, whatever else freed them).
+    pub fn add_keyframe_seeing(
+        &mut self,
+        origin_m: &[f64; 3],
+        points_m: &[[f64; 3]],
+        keyframe: u32,
+        cfg: &EvidenceConfig,
+        shapes: Option<&SurfaceShapes>,
+        no_return: Option<&NoReturn<'_>>,
+    ) -> RayStats {
         let v = self.voxel_m;
         let mut out = RayStats { rays: points_m.len(), ..Default::default() };
         let Some(o_key) = voxel_key(origin_m, v) else {
             out.skipped_rays = points_m.len();
             return out;
         };
+        let sky = no_return.map(|nr| self.no_return_rows(origin_m, nr)).unwrap_or_default();
+        let mut sky_bits = vec![0u64; if sky.is_empty() { 0 } else { self.rows.len().div_ceil(64) }];
+        for &i in &sky {
+            sky_bits[i as usize / 64] |= 1 << (i % 64);
+        }
         let b = Box3::of_rays(origin_m, points_m, v).intersect(&self.bounds).limit(o_key.0, DENSE_MAX_VOXELS);
         let cast = if b.is_empty() {
             points_m.iter().filter(|p| voxel_key(p, v).is_some()).count()
@@ -517,13 +548,62 @@ impl InterestEvidence {
                     hit.is_some() as usize
                 })
                 .sum();
-            let (h, f) = self.apply(&marks, origin_m, keyframe, cfg, shapes);
+            let (h, f) = self.apply(&marks, origin_m, keyframe, cfg, shapes, &sky_bits);
             out.hit_voxels = h;
             out.free_voxels = f;
             cast
         };
         out.skipped_rays = points_m.len() - cast;
+        self.add_free_rows(&sky, origin_m, keyframe, cfg);
+        out.no_return_voxels = sky.len();
         out
+    }
+
+    /// Rows of `nr.candidates` within reach whose direction from the sensor
+    /// returned nothing, ascending.
+    fn no_return_rows(&self, origin_m: &[f64; 3], nr: &NoReturn<'_>) -> Vec<u32> {
+        let v = self.voxel_m;
+        let reach = (nr.range_m / v).ceil() as i32 + 1;
+        let Some(o) = voxel_key(origin_m, v) else { return Vec::new() };
+        let b = Box3 { lo: o.0.map(|c| c.saturating_sub(reach)), hi: o.0.map(|c| c.saturating_add(reach)) };
+        let (lo, hi) = self.x_range(&b);
+        let from = nr.candidates.partition_point(|&i| (i as usize) < lo);
+        let to = nr.candidates.partition_point(|&i| (i as usize) < hi);
+        let r_sensor_world = nr.r_world_sensor.inverse();
+        let min_sin = nr.min_elevation_deg.to_radians().sin();
+        (from..to)
+            .into_par_iter()
+            .with_min_len(1024)
+            .filter(|&j| {
+                let k = unpack(self.keys[nr.candidates[j] as usize]).0;
+                let c = nalgebra::Vector3::from([0, 1, 2].map(|a| (k[a] as f64 + 0.5) * v - origin_m[a]));
+                let r = c.norm();
+                if !(r > v && r <= nr.range_m.min(nr.candidate_range_m[j] as f64)) || c.z < min_sin * r {
+                    return false;
+                }
+                nr.image.is_empty_around(&(r_sensor_world * c).into())
+            })
+            .map(|j| nr.candidates[j])
+            .collect()
+    }
+
+    /// Eq. 4's free evidence of one keyframe on the given rows.
+    fn add_free_rows(&mut self, rows: &[u32], origin_m: &[f64; 3], keyframe: u32, cfg: &EvidenceConfig) {
+        let v = self.voxel_m;
+        let (_, l_miss, l_min, l_max) = cfg.log_odds.log_odds();
+        for &i in rows {
+            let k = unpack(self.keys[i as usize]).0;
+            let c = [0, 1, 2].map(|a| (k[a] as f64 + 0.5) * v - origin_m[a]);
+            let r = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
+            let u = c.map(|x| (x / r) as f32);
+            let q = cfg.range_weight(r) as f32;
+            let row = &mut self.rows[i as usize];
+            Row::add(&mut row.free_n, &mut row.free_q, &mut row.free_m, q, u);
+            row.no_return_n += 1;
+            row.offer_owner(keyframe, q);
+            let l = &mut self.log_odds[i as usize];
+            *l = (*l + l_miss).clamp(l_min, l_max);
+        }
     }
 
     /// Pass 2: eq. 4 once per marked interest voxel and kind.
@@ -536,6 +616,7 @@ impl InterestEvidence {
         keyframe: u32,
         cfg: &EvidenceConfig,
         shapes: Option<&SurfaceShapes>,
+        skip: &[u64],
     ) -> (usize, usize) {
         let (lo, hi) = self.x_range(&marks.b);
         let v = self.voxel_m;
@@ -547,8 +628,13 @@ impl InterestEvidence {
             .par_iter_mut()
             .zip(self.log_odds[lo..hi].par_iter_mut())
             .zip(keys.par_iter())
+            .enumerate()
             .with_min_len(4096)
-            .for_each(|((row, lo_odds), &pk)| {
+            .for_each(|(j, ((row, lo_odds), &pk))| {
+                let i = lo + j;
+                if skip.get(i / 64).is_some_and(|w| w & (1 << (i % 64)) != 0) {
+                    return;
+                }
                 let k = unpack(pk).0;
                 if !marks.b.contains(&k) {
                     return;
@@ -628,6 +714,7 @@ impl InterestEvidence {
             free.m.push(r.free_m);
             t.owner_keyframe.push(r.owner_keyframe);
             t.owner_q.push(r.owner_q);
+            t.no_return_n.push(r.no_return_n);
         }
         t.hit = hit;
         t.free = free;
@@ -646,6 +733,7 @@ pub fn row_of(t: &SubmapEvidence, i: usize) -> Row {
         free_m: t.free.m[i],
         owner_keyframe: t.owner_keyframe[i],
         owner_q: t.owner_q[i],
+        no_return_n: t.no_return_n.get(i).copied().unwrap_or(0),
     }
 }
 

@@ -24,11 +24,13 @@
 //! `A_gen⁻¹ · x`, with `A_gen` from the stored graph version.
 
 use super::grid::{Box3, InterestEvidence, RayStats, Row, pack, packed_key, row_of, unpack};
+use super::no_return::{NoReturn, NoReturnImage};
 use super::raycast::voxel_key;
 use super::stats::{EvidenceConfig, FreeTest};
 use super::surface::{MapPatch, Moments, SurfaceShapes};
 use super::tables::{CleanedMap, NO_HIT_BOX, PointLabels, SubmapEvidence};
 use crate::geometry::{Pose, VoxelKey, rotate_sym, rotation_rows, transformed};
+use crate::sensor::Fov;
 use nalgebra::Point3;
 use rayon::prelude::*;
 use rustc_hash::FxHashMap;
@@ -64,6 +66,8 @@ pub struct GenerationStats {
     pub keyframes: usize,
     pub points: usize,
     pub skipped_rays: usize,
+    /// Map voxels freed by beams that returned nothing, summed over keyframes.
+    pub no_return_voxels: usize,
     /// Voxels of interest (occupied by this session's points or given).
     pub interest_voxels: usize,
     /// Voxels with stored evidence, summed over submaps.
@@ -88,9 +92,15 @@ fn origin(kf: &KeyframeInput<'_>) -> [f64; 3] {
 /// those the session's own points occupy — the earlier sessions' map, which
 /// change detection compares against — with the patch of points each had,
 /// which this session's rays must cross to free it (`evidence::surface`).
+///
+/// `fov` is the session's sensor field of view; with a spinning sensor's
+/// band, the beams that returned nothing free the map voxels this session's
+/// points do not occupy (`evidence::no_return`, up to
+/// `cfg.no_return_range_m`).
 pub fn generate(
     keyframes: &[KeyframeInput<'_>],
     map: &[MapPatch],
+    fov: Option<&Fov>,
     cfg: &EvidenceConfig,
     mut progress: impl FnMut(usize),
 ) -> SessionEvidence {
@@ -108,14 +118,51 @@ pub fn generate(
             (keys, Box3::of_rays(&origin(kf), &pts, v))
         })
         .collect();
+    let no_return_fov = fov.filter(|f| cfg.no_return_range_m > 0.0 && matches!(f, Fov::Band { .. }) && !map.is_empty());
     let mut submap_box = vec![Box3::EMPTY; n_submaps];
     let mut keys: Vec<u64> = map.iter().map(|p| p.key).collect();
+    let reach = (cfg.no_return_range_m / v).ceil() as i32 + 1;
     for (kf, (k, b)) in keyframes.iter().zip(&per_kf) {
         submap_box[kf.submap] = submap_box[kf.submap].union(b);
+        if let (Some(_), Some(o)) = (no_return_fov, voxel_key(&origin(kf), v)) {
+            let around = Box3 { lo: o.0.map(|c| c.saturating_sub(reach)), hi: o.0.map(|c| c.saturating_add(reach)) };
+            submap_box[kf.submap] = submap_box[kf.submap].union(&around);
+        }
         keys.extend_from_slice(k);
     }
-    drop(per_kf);
     let mut session = InterestEvidence::new(keys, v);
+    // Map voxels with none of this session's points within about
+    // `no_return_clear_m`: the only ones beams that returned nothing may
+    // free, each up to the range it was seen from (× the reach factor).
+    let no_return_reach: Vec<f32> = if no_return_fov.is_some() {
+        let cell = ((cfg.no_return_clear_m / v).round() as i32).max(1);
+        let coarse = |k: u64| unpack(k).0.map(|c| c.div_euclid(cell));
+        let occupied: rustc_hash::FxHashSet<[i32; 3]> =
+            per_kf.iter().flat_map(|(k, _)| k.iter().map(|&k| coarse(k))).collect();
+        let reach = i32::from(cfg.no_return_clear_m > 0.0);
+        let clear = |k: u64| {
+            let c = coarse(k);
+            let r = -reach..=reach;
+            !r.clone()
+                .any(|dx| r.clone().any(|dy| r.clone().any(|dz| occupied.contains(&[c[0] + dx, c[1] + dy, c[2] + dz]))))
+        };
+        let mut in_map: Vec<(u64, f64)> = map.iter().map(|p| (p.key, p.seen_from_m)).collect();
+        in_map.par_sort_unstable_by_key(|p| p.0);
+        let occupied_keys = |k: &u64| per_kf.iter().any(|(keys, _)| keys.binary_search(k).is_ok());
+        session
+            .keys()
+            .par_iter()
+            .map(|k| match in_map.binary_search_by_key(k, |p| p.0) {
+                Ok(i) if clear(*k) && (reach > 0 || !occupied_keys(k)) => {
+                    (in_map[i].1 * cfg.no_return_reach_factor).min(cfg.no_return_range_m) as f32
+                }
+                _ => 0.0,
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
+    drop(per_kf);
     let shapes = (cfg.free_test == FreeTest::Surface)
         .then(|| SurfaceShapes::build(session.keys(), keyframes.iter().map(world_points), v, map, cfg));
     let mut stats = GenerationStats {
@@ -131,16 +178,34 @@ pub fn generate(
     for (s, b) in submap_box.iter().enumerate() {
         let (mut sub, idx) = session.subset(b);
         session.continue_log_odds(&mut sub, &idx);
+        let (candidates, candidate_range_m): (Vec<u32>, Vec<f32>) = if no_return_reach.is_empty() {
+            Default::default()
+        } else {
+            (0..idx.len() as u32)
+                .map(|j| (j, no_return_reach[idx[j as usize] as usize]))
+                .filter(|&(_, r)| r > 0.0)
+                .unzip()
+        };
         let mut rays = RayStats::default();
         let mut boxes = vec![EMPTY_BOX; sub.len()];
         for kf in keyframes.iter().filter(|k| k.submap == s) {
             let pts = world_points(kf);
-            rays += sub.add_keyframe(&origin(kf), &pts, kf.index, cfg, shapes.as_ref());
+            let image = no_return_fov.and_then(|f| NoReturnImage::build(kf.points, f, cfg.no_return_margin_deg));
+            let no_return = image.as_ref().map(|image| NoReturn {
+                image,
+                r_world_sensor: kf.t_world_keyframe.rotation,
+                candidates: &candidates,
+                candidate_range_m: &candidate_range_m,
+                range_m: cfg.no_return_range_m,
+                min_elevation_deg: cfg.no_return_min_elevation_deg,
+            });
+            rays += sub.add_keyframe_seeing(&origin(kf), &pts, kf.index, cfg, shapes.as_ref(), no_return.as_ref());
             grow_hit_boxes(&sub, &pts, &mut boxes);
             done += 1;
             progress(done);
         }
         stats.skipped_rays += rays.skipped_rays;
+        stats.no_return_voxels += rays.no_return_voxels;
         for b in &mut boxes {
             if b[0] > b[3] {
                 *b = NO_HIT_BOX;
@@ -447,7 +512,7 @@ pub struct ReprojectionCheck {
 /// evidence with ray casting again on the new poses.
 pub fn check_reprojection(inputs: &[KeyframeInput<'_>], poses_now: &[Pose], cfg: &EvidenceConfig) -> ReprojectionCheck {
     let t = Instant::now();
-    let before = generate(inputs, &[], cfg, |_| {});
+    let before = generate(inputs, &[], None, cfg, |_| {});
     let generate_s = t.elapsed().as_secs_f64();
     let by_index: FxHashMap<u32, Pose> =
         inputs.iter().zip(poses_now).map(|(k, now)| (k.index, delta(&k.t_world_keyframe, now))).collect();
@@ -460,7 +525,7 @@ pub fn check_reprojection(inputs: &[KeyframeInput<'_>], poses_now: &[Pose], cfg:
     let now_inputs: Vec<KeyframeInput<'_>> =
         inputs.iter().zip(poses_now).map(|(k, p)| KeyframeInput { t_world_keyframe: *p, ..*k }).collect();
     let t = Instant::now();
-    let after = generate(&now_inputs, &[], cfg, |_| {});
+    let after = generate(&now_inputs, &[], None, cfg, |_| {});
     let recompute_s = t.elapsed().as_secs_f64();
     let tables: Vec<&SubmapEvidence> = after.submaps.iter().collect();
     let fresh = reproject(&tables, cfg.voxel_size_m, |_| None);
@@ -569,7 +634,7 @@ mod tests {
             })
             .collect();
         let cfg = EvidenceConfig::default();
-        let out = generate(&inputs, &[], &cfg, |_| {});
+        let out = generate(&inputs, &[], None, &cfg, |_| {});
         assert_eq!(out.submaps.len(), 3);
         assert_eq!(out.labels.len(), scans.iter().map(|s| s.0.len()).sum::<usize>());
         let n_static = static_pts.len() + 800;
@@ -617,6 +682,114 @@ mod tests {
             }
         }
         assert!(walls > 100 && spread_x * 4 > walls, "{spread_x} of {walls} wall voxels spread along x");
+    }
+
+    /// A spinning sensor (64 beams over ±22.5°, 512 columns) at 1.8 m on a
+    /// road past a wall along y = 15 m (x in ±50 m, 40 m tall): returns from
+    /// the ground and the wall, nothing from the open sky to the south.
+    fn road_and_wall_scan(origin: [f64; 3]) -> Vec<[f32; 3]> {
+        let mut out = Vec::new();
+        for b in 0..64 {
+            let el = (-22.5 + 45.0 * b as f64 / 63.0f64).to_radians();
+            for c in 0..512 {
+                let az = std::f64::consts::TAU * c as f64 / 512.0;
+                let d = [el.cos() * az.cos(), el.cos() * az.sin(), el.sin()];
+                let mut t = f64::INFINITY;
+                if d[2] < 0.0 {
+                    t = t.min(-origin[2] / d[2]);
+                }
+                if d[1] > 0.0 {
+                    let tw = (15.0 - origin[1]) / d[1];
+                    let (x, z) = (origin[0] + tw * d[0], origin[2] + tw * d[2]);
+                    if x.abs() < 50.0 && (0.0..40.0).contains(&z) {
+                        t = t.min(tw);
+                    }
+                }
+                if t <= 100.0 {
+                    out.push(d.map(|x| (x * t) as f32));
+                }
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn beams_that_returned_nothing_free_a_removed_jib_but_not_the_wall_ground_or_far() {
+        let poses: Vec<Pose> = (0..6)
+            .map(|i| Pose::from_parts(Translation3::new(i as f64 * 2.0 - 5.0, 0.0, 1.8), UnitQuaternion::identity()))
+            .collect();
+        let scans: Vec<Vec<[f32; 3]>> = poses.iter().map(|p| road_and_wall_scan(p.translation.vector.into())).collect();
+        let inputs: Vec<KeyframeInput<'_>> = scans
+            .iter()
+            .zip(&poses)
+            .enumerate()
+            .map(|(i, (pts, t))| KeyframeInput { index: i as u32, submap: i / 3, t_world_keyframe: *t, points: pts })
+            .collect();
+        let v = 0.2;
+        let patch = |p: [f64; 3]| MapPatch {
+            key: packed_key(&p, v).unwrap(),
+            xyz_m: p,
+            points: 5,
+            spread_m2: [1e-3, 0.0, 0.0, 1e-3, 0.0, 1e-4],
+            seen_from_m: 38.0,
+        };
+        // An earlier session's jib in the open sky, the wall's far face, a
+        // kerb to the south (below the horizon), a jib beyond reach.
+        let (jib, behind_wall, kerb, far) =
+            ([3.0, -40.0, 12.0], [0.0, 15.3, 5.0], [0.0, -30.0, 0.1], [0.0, -150.0, 30.0]);
+        let map: Vec<MapPatch> = [jib, behind_wall, kerb, far].into_iter().map(patch).collect();
+        let band = Fov::Band { elev_min_deg: -22.5, elev_max_deg: 22.5 };
+        let cfg = EvidenceConfig::default();
+        let out = generate(&inputs, &map, Some(&band), &cfg, |_| {});
+        let row_in = |out: &SessionEvidence, p: [f64; 3]| {
+            let k = voxel_key(&p, v).unwrap();
+            let mut r = Row::default();
+            for t in &out.submaps {
+                if let Some(i) = t.keys.iter().position(|x| *x == k) {
+                    r.merge(&row_of(t, i));
+                }
+            }
+            r
+        };
+        let row = |p| row_in(&out, p);
+        let r = row(jib);
+        assert_eq!((r.no_return_n, r.free_n), (6, 6), "every keyframe saw the sky where the jib was");
+        assert!(r.free_q > 0.0 && r.owner_q > 0.0);
+        for p in [behind_wall, kerb, far] {
+            assert_eq!(row(p).no_return_n, 0, "{p:?}");
+        }
+        assert_eq!(out.stats.no_return_voxels, 6);
+        // Without a band (a forward-looking sensor, or unknown) nothing is freed this way.
+        let rect = Fov::Rect { azimuth_deg: 70.0, elevation_deg: 77.0 };
+        for fov in [None, Some(&rect)] {
+            let out = generate(&inputs, &map, fov, &cfg, |_| {});
+            assert_eq!(out.stats.no_return_voxels, 0);
+        }
+        // Nor when the map saw it from much closer than this session's beams
+        // pass: a surface seen from 20 m may return nothing from 41 m.
+        let close: Vec<MapPatch> = map.iter().map(|p| MapPatch { seen_from_m: 20.0, ..*p }).collect();
+        assert_eq!(generate(&inputs, &close, Some(&band), &cfg, |_| {}).stats.no_return_voxels, 0);
+        // Nor with the range set to 0.
+        let off = EvidenceConfig { no_return_range_m: 0.0, ..cfg.clone() };
+        assert_eq!(generate(&inputs, &map, Some(&band), &off, |_| {}).stats.no_return_voxels, 0);
+        // A point of this session 0.6 m above the jib (1° away from it at
+        // 40 m: outside a 0.01° window) keeps it: something is still there.
+        let tip: Vec<Vec<[f32; 3]>> = scans
+            .iter()
+            .zip(&poses)
+            .map(|(s, p)| {
+                let mut s = s.clone();
+                let q = p.inverse() * Point3::new(jib[0], jib[1], jib[2] + 0.6);
+                s.push([q.x as f32, q.y as f32, q.z as f32]);
+                s
+            })
+            .collect();
+        let tip_inputs: Vec<KeyframeInput<'_>> =
+            inputs.iter().zip(&tip).map(|(k, s)| KeyframeInput { points: s, ..*k }).collect();
+        let narrow = EvidenceConfig { no_return_margin_deg: 0.01, ..cfg.clone() };
+        assert_eq!(row_in(&generate(&tip_inputs, &map, Some(&band), &narrow, |_| {}), jib).no_return_n, 0);
+        let anywhere = EvidenceConfig { no_return_clear_m: 0.0, ..narrow };
+        assert_eq!(row_in(&generate(&tip_inputs, &map, Some(&band), &anywhere, |_| {}), jib).no_return_n, 6);
     }
 
     /// Reprojection by ΔT of the poses that generated the evidence is the

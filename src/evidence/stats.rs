@@ -93,6 +93,28 @@ pub struct EvidenceConfig {
     /// With `map_patches`, a map voxel gets its patch only with at least
     /// this many points behind it; fewer: the voxel rule.
     pub surface_map_min_points: u32,
+    /// Beams that returned nothing free the earlier sessions' map voxels
+    /// within this range that this session's points do not occupy
+    /// (`evidence::no_return`); only change detection sees it. Spinning
+    /// sensors only (the session's field of view is a band). 0 disables.
+    pub no_return_range_m: f64,
+    /// ... and only voxels with none of this session's points within about
+    /// this distance (cells of this size, the voxel's and its 26
+    /// neighbours): a building the session sees elsewhere is still there,
+    /// even where its far, dark or grazing parts return nothing. 0: only
+    /// the voxel itself must hold no point.
+    pub no_return_clear_m: f64,
+    /// ... and only from at most this many times the range the voxel was
+    /// seen from (its placing keyframe's distance): what returned at 30 m
+    /// may well return nothing at 80 m.
+    pub no_return_reach_factor: f64,
+    /// No return within this many degrees of the direction, either way.
+    /// Wider than the sensor's beam spacing.
+    pub no_return_margin_deg: f64,
+    /// Only directions at least this far above the horizontal (world):
+    /// below it, dark and grazing ground past the sensor's reach returns
+    /// nothing too.
+    pub no_return_min_elevation_deg: f64,
     /// Which per-voxel model turns rays into ε_l: seam's directional
     /// evidence, or the scalar log-odds baseline for the ablation.
     pub model: EvidenceModel,
@@ -196,6 +218,11 @@ impl Default for EvidenceConfig {
             surface_single_sigma_m: 0.03,
             map_patches: false,
             surface_map_min_points: 3,
+            no_return_range_m: 100.0,
+            no_return_clear_m: 1.0,
+            no_return_reach_factor: 1.25,
+            no_return_margin_deg: 1.5,
+            no_return_min_elevation_deg: 3.0,
             model: EvidenceModel::Directional,
             log_odds: LogOddsConfig::default(),
         }
@@ -220,10 +247,25 @@ impl EvidenceConfig {
             ("surface_tolerance_m", self.surface_tolerance_m),
             ("surface_behind_m", self.surface_behind_m),
             ("surface_single_sigma_m", self.surface_single_sigma_m),
+            ("no_return_range_m", self.no_return_range_m),
+            ("no_return_clear_m", self.no_return_clear_m),
+            ("no_return_reach_factor", self.no_return_reach_factor),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(format!("evidence.{name} is {v}; it must be zero or a positive number"));
             }
+        }
+        if !(self.no_return_margin_deg.is_finite() && self.no_return_margin_deg > 0.0) {
+            return Err(format!(
+                "evidence.no_return_margin_deg is {}; it must be a positive number of degrees (default 1.5)",
+                self.no_return_margin_deg
+            ));
+        }
+        if !(-90.0..=90.0).contains(&self.no_return_min_elevation_deg) {
+            return Err(format!(
+                "evidence.no_return_min_elevation_deg is {}; it must lie in [-90, 90] (default 3)",
+                self.no_return_min_elevation_deg
+            ));
         }
         if !(0.0..=1.0).contains(&self.omega_floor) {
             return Err(format!("evidence.omega_floor is {}; it must lie in [0, 1] (default 0.2)", self.omega_floor));

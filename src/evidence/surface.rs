@@ -143,6 +143,11 @@ pub struct MapPatch {
     pub points: u32,
     /// Covariance about the centroid, m²; not finite: no patch (voxel rule).
     pub spread_m2: Sym3,
+    /// Distance from the keyframe that placed it (the one most of its
+    /// points came from) to the centroid, m; infinite when unknown. A beam
+    /// that returned nothing from much farther away says little: a dark or
+    /// grazing surface seen at 30 m returns nothing at 80 m (`evidence::no_return`).
+    pub seen_from_m: f64,
 }
 
 fn dot(a: &[f64; 3], b: &[f64; 3]) -> f64 {
@@ -573,7 +578,13 @@ mod tests {
                 let (a, b) = pairs[j];
                 (pts.iter().map(|p| (p[a] - mean[a]) * (p[b] - mean[b])).sum::<f64>() / n) as f32
             });
-            MapPatch { key: packed_key(&mean, v).unwrap(), xyz_m: mean, points: pts.len() as u32, spread_m2: spread }
+            MapPatch {
+                key: packed_key(&mean, v).unwrap(),
+                xyz_m: mean,
+                points: pts.len() as u32,
+                spread_m2: spread,
+                seen_from_m: 10.0,
+            }
         };
         let under_ground: Vec<[f64; 3]> =
             (0..25).map(|i| [10.02 + 0.04 * (i % 5) as f64, 0.02 + 0.04 * (i / 5) as f64, 0.02]).collect();

@@ -51,6 +51,9 @@ pub struct SubmapEvidence {
     /// Reprojection moves this box, not the voxel centre, so a voxel whose
     /// points straddle a new voxel boundary lands in every voxel they do.
     pub hit_box_m: Vec<[f32; 6]>,
+    /// Keyframes whose beams that returned nothing freed the voxel (part of
+    /// `free.n`; `evidence::no_return`). Files written before it read as 0.
+    pub no_return_n: Vec<u32>,
 }
 
 /// The `hit_box_m` of a voxel no point fell into.

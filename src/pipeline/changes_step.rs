@@ -92,12 +92,10 @@ pub(super) fn changes(ctx: &mut StepCtx<'_>, step: &'static str, seq: i64) -> Re
         })
     });
     let new = detect::new_voxels(rows, v, |k| evidence.get(k).map_or(0.0, |r| r.evidence().hit.omega(ecfg) as f32));
-    let reliability = ctx.config.change.deleted_reliability;
     let free_at = |k: u64| {
         evidence.get(k).map(|r| {
-            let n_sat = ctx.config.change.free_support_keyframes.max(1);
-            let support = r.free_n.min(n_sat) as f64 / n_sat as f64;
-            (r.free_n, reliability.of(r.evidence().free.omega(ecfg), support) as f32)
+            let w = ctx.config.change.deleted_weight(r.evidence().free.omega(ecfg), r.free_n, r.no_return_n);
+            (r.free_n, w as f32)
         })
     };
     let next_id = map.max_id() + 1;

@@ -68,14 +68,28 @@ pub(super) fn evidence(ctx: &mut StepCtx<'_>, step: &'static str, seq: i64) -> R
     // too: change detection asks whether this session saw them free, which
     // takes a ray through the patch of points each had.
     let (map, _) = super::changes_step::placed_map(ctx.store.conn(), version, cfg.voxel_size_m)?;
+    let sensor_at: HashMap<(i64, u32), [f64; 3]> = sessions
+        .iter()
+        .flat_map(|s| {
+            s.keyframes
+                .iter()
+                .map(move |k| ((s.id().0, k.row.keyframe_index as u32), k.t_world_keyframe.translation.vector.into()))
+        })
+        .collect();
     let map_patches: Vec<MapPatch> = map
         .voxels
         .iter()
-        .filter_map(|v| Some(MapPatch { key: pack(v.key)?, xyz_m: v.xyz_m, points: v.points, spread_m2: v.spread_m2 }))
+        .filter_map(|v| {
+            let seen_from_m = sensor_at
+                .get(&(v.owner_session, v.owner_keyframe))
+                .map_or(f64::INFINITY, |o: &[f64; 3]| (0..3).map(|a| (v.xyz_m[a] - o[a]).powi(2)).sum::<f64>().sqrt());
+            Some(MapPatch { key: pack(v.key)?, xyz_m: v.xyz_m, points: v.points, spread_m2: v.spread_m2, seen_from_m })
+        })
         .collect();
     drop(map);
     ctx.progress.begin("ray cast", inputs.len() as u64);
-    let out = session::generate(&inputs, &map_patches, cfg, |_| ctx.progress.advance(1));
+    let fov = crate::align::session_fov(&state.row, || scans.first().cloned());
+    let out = session::generate(&inputs, &map_patches, Some(&fov), cfg, |_| ctx.progress.advance(1));
     ctx.progress.end();
     drop(inputs);
     drop(scans);
@@ -152,6 +166,7 @@ pub(super) fn evidence(ctx: &mut StepCtx<'_>, step: &'static str, seq: i64) -> R
         "dynamic_voxels": st.dynamic_voxels,
         "cleaned_voxels": st.cleaned_voxels,
         "skipped_rays": st.skipped_rays,
+        "no_return_voxels": st.no_return_voxels,
         "raycast_s": st.raycast_s,
         "generate_s": st.total_s,
         "reprojected_rows": reprojected_rows,

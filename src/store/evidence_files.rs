@@ -17,7 +17,7 @@
 //!
 //! | kind           | columns |
 //! |----------------|---------|
-//! | `evidence`     | `kx ky kz` int32, `{hit,free}_n` int32, `{hit,free}_q` float32, `{hit,free}_m{xx,xy,xz,yy,yz,zz}` float32, `owner_keyframe` int32, `owner_q` float32, `hit_{lo,hi}_{x,y,z}_m` float32 (NaN: no point) |
+//! | `evidence`     | `kx ky kz` int32, `{hit,free}_n` int32, `{hit,free}_q` float32, `{hit,free}_m{xx,xy,xz,yy,yz,zz}` float32, `owner_keyframe` int32, `owner_q` float32, `hit_{lo,hi}_{x,y,z}_m` float32 (NaN: no point), `no_return_n` int32 (absent in older files: 0) |
 //! | `cleaned_map`  | `x_m y_m z_m eps_l` float32, `points owner_keyframe` int32 |
 //! | `point_labels` | `keyframe point_index` int32, `dynamic` boolean, `eps_l` float32 (also the export format) |
 
@@ -166,6 +166,9 @@ fn stats_fields(prefix: &str) -> Vec<Field> {
 /// The six `hit_box_m` columns, in its order.
 const HIT_BOX_COLUMNS: [&str; 6] = ["hit_lo_x_m", "hit_lo_y_m", "hit_lo_z_m", "hit_hi_x_m", "hit_hi_y_m", "hit_hi_z_m"];
 
+/// The `evidence` column added with `evidence::no_return`; older files lack it.
+const NO_RETURN_N: &str = "no_return_n";
+
 /// Columns of an `evidence` file.
 pub fn submap_evidence_schema() -> SchemaRef {
     let mut f = vec![field("kx", DataType::Int32), field("ky", DataType::Int32), field("kz", DataType::Int32)];
@@ -174,6 +177,7 @@ pub fn submap_evidence_schema() -> SchemaRef {
     f.push(field("owner_keyframe", DataType::Int32));
     f.push(field("owner_q", DataType::Float32));
     f.extend(HIT_BOX_COLUMNS.iter().map(|c| field(*c, DataType::Float32)));
+    f.push(field(NO_RETURN_N, DataType::Int32));
     Arc::new(Schema::new(f))
 }
 
@@ -269,6 +273,7 @@ pub fn submap_evidence_batch(path: &Path, ev: &SubmapEvidence) -> Result<RecordB
             ("owner_keyframe", ev.owner_keyframe.len()),
             ("owner_q", ev.owner_q.len()),
             ("hit_box_m", ev.hit_box_m.len()),
+            ("no_return_n", ev.no_return_n.len()),
         ],
     )?;
     let mut cols: Vec<ArrayRef> = (0..3).map(|i| i32_col(ev.keys.iter().map(|k| k.0[i]))).collect();
@@ -277,6 +282,7 @@ pub fn submap_evidence_batch(path: &Path, ev: &SubmapEvidence) -> Result<RecordB
     cols.push(u32_col(path, "owner_keyframe", &ev.owner_keyframe)?);
     cols.push(f32_col(ev.owner_q.iter().copied()));
     cols.extend((0..6).map(|i| f32_col(ev.hit_box_m.iter().map(|b| b[i]))));
+    cols.push(u32_col(path, NO_RETURN_N, &ev.no_return_n)?);
     batch(path, submap_evidence_schema(), cols)
 }
 
@@ -479,7 +485,7 @@ impl Table {
 
 /// Reads an `evidence` file back.
 pub fn read_submap_evidence(path: &Path) -> Result<SubmapEvidence, StoreError> {
-    let t = Table::read(path, &submap_evidence_schema())?;
+    let t = Table::read_with_optional(path, &submap_evidence_schema(), &[NO_RETURN_N.to_string()])?;
     let (kx, ky, kz) = (t.i32s("kx")?, t.i32s("ky")?, t.i32s("kz")?);
     let keys = (0..t.rows).map(|r| VoxelKey([kx[r], ky[r], kz[r]])).collect();
     let boxes: Vec<Vec<f32>> = HIT_BOX_COLUMNS.iter().map(|c| t.f32s(c)).collect::<Result<_, _>>()?;
@@ -490,6 +496,7 @@ pub fn read_submap_evidence(path: &Path) -> Result<SubmapEvidence, StoreError> {
         free: t.stats("free")?,
         owner_keyframe: t.u32s("owner_keyframe")?,
         owner_q: t.f32s("owner_q")?,
+        no_return_n: if t.has(NO_RETURN_N) { t.u32s(NO_RETURN_N)? } else { vec![0; t.rows] },
     })
 }
 
@@ -581,6 +588,7 @@ mod tests {
             owner_keyframe: (0..n as u32).map(|i| i % 4).collect(),
             owner_q: (0..n).map(|i| 1.0 / (i as f32 + 1.0)).collect(),
             hit_box_m: (0..n).map(|i| std::array::from_fn(|k| (i % 5 + k) as f32 * 0.02)).collect(),
+            no_return_n: (0..n as u32).map(|i| i % 3).collect(),
         }
     }
 
@@ -628,7 +636,8 @@ mod tests {
             assert_eq!(read_submap_evidence(&s.path_of(&rel)).unwrap(), ev);
         }
         let cols: Vec<String> = submap_evidence_schema().fields().iter().map(|f| f.name().clone()).collect::<Vec<_>>();
-        assert_eq!(cols.len(), 3 + 8 + 8 + 2 + 6);
+        assert_eq!(cols.len(), 3 + 8 + 8 + 2 + 6 + 1);
+        assert_eq!(cols.last().map(String::as_str), Some("no_return_n"));
         assert!(cols.contains(&"free_mzz".to_string()) && cols.contains(&"hit_mxy".to_string()));
         // A voxel no point fell in keeps its NaN box.
         let mut ev = evidence(3);
@@ -650,6 +659,25 @@ mod tests {
             assert_record(&s, &rec, "cleaned_map", n);
             assert_eq!(read_cleaned_map(&s.path_of(&rel)).unwrap(), m);
         }
+    }
+
+    /// An evidence file written before the no-return count reads with it 0.
+    #[test]
+    fn evidence_without_the_no_return_column_reads_as_zero() {
+        let dir = tempfile::tempdir().unwrap();
+        let s = store(&dir);
+        let ev = evidence(4);
+        let full = submap_evidence_batch(Path::new("x"), &ev).unwrap();
+        let n = full.num_columns() - 1;
+        let old = RecordBatch::try_new(
+            Arc::new(Schema::new(submap_evidence_schema().fields()[..n].to_vec())),
+            full.columns()[..n].to_vec(),
+        )
+        .unwrap();
+        write_table(&s, "data/old_ev.parquet", "evidence", &old).unwrap();
+        let back = read_submap_evidence(&s.path_of("data/old_ev.parquet")).unwrap();
+        assert_eq!(back.no_return_n, vec![0; 4]);
+        assert_eq!(SubmapEvidence { no_return_n: ev.no_return_n.iter().map(|_| 0).collect(), ..ev }, back);
     }
 
     /// A cleaned map written before seam kept the points' spread reads with
