@@ -63,8 +63,8 @@ fn sessions_are_aligned_jointly_within_a_decimetre() {
     assert_eq!(lines.count(), 4 * 150);
 
     // Change detection on the same site, against the simulator's objects.
-    // Removed objects' leftovers (goal ≤ 5 %) are not asserted: seam leaves
-    // too many of them static today (see `seam eval changes`).
+    // Removed objects' leftovers are not held to their goal (≤ 5 %): seam
+    // leaves too many of them static today (see `seam eval changes`).
     let report = json_of(&["eval", "changes", st, "--gt", sim.to_str().unwrap(), "--format", "json"]);
     let goal = |name: &str| {
         let g = report["goals"].as_array().unwrap().iter().find(|g| g["metric"] == name).unwrap().clone();
@@ -79,9 +79,12 @@ fn sessions_are_aligned_jointly_within_a_decimetre() {
         let (value, met) = goal(name);
         assert!(met, "{name}: {value:.4} misses its goal: {}", report["goals"]);
     }
-    // Seeing a removed object's space free must lower what is left of it.
+    // Seeing a removed object's space free must lower what is left of it:
+    // 17.3 % here when written (4 × 150 keyframes), 30-46 % on such sites
+    // under the earlier default, `omega_or_half_support`.
     let (left, _) = goal("removed-object voxels left in the static map");
-    assert!(left < 0.9, "removed objects stay in the static map: {left:.3}");
+    eprintln!("removed-object voxels left static: {left:.4}");
+    assert!(left < 0.25, "removed objects stay in the static map: {left:.3}");
 }
 
 /// A session that shares nothing with the store is kept, unaligned, with the

@@ -62,32 +62,33 @@ pub struct ChangeConfig {
 /// voxel, which enters ε_g as `B(ε_g, ½ + ½w)` ([`deleted_factor`]); `s` is
 /// the free support `min(n_free, n) / n`, n = `free_support_keyframes`.
 ///
-/// Measured on a simulated 5-session OS1-64 site (80 keyframes each, `seam
-/// eval changes`; permanent structure kept static / removed objects' voxels
-/// left static): `omega` 99.34 % / 65.7 %, `omega_or_half_support` 99.04 % /
-/// 57.3 %, `omega_or_support` 97.81 % / 41.8 %. Free evidence from one
-/// direction only (ω ≈ 0) is common at deleted voxels: 72 % of them there.
-/// The default is `omega_or_half_support`: on 5-session sites of every
-/// simulated sensor and on the 1,500-keyframe demo site it kept ≥ 99.0 % of
-/// permanent structure static, as `omega` does, and left 2.5-10 points fewer
-/// removed voxels static.
+/// The default is `omega_or_support`: four of five keyframes seeing the
+/// space empty, from whatever direction, take a voxel out of the static map
+/// in one session. Free evidence from one direction only (ω ≈ 0) is common
+/// at deleted voxels (72 % of them on an OS1-64 site), so `omega` alone
+/// removes little. Measured on simulated 5-session sites, 150 keyframes per
+/// session (seed 3; the OS1-64 row is the README's demo site, seed 1), with
+/// the no-return evidence: `seam eval changes`, permanent structure kept
+/// static / removed objects' voxels left static:
 ///
-/// Re-measured after the surface free test (5 sessions × 80 keyframes, seed
-/// 3; 5 × 150 for OS1-64, the demo site), permanent kept / removed left:
-/// `omega_or_support` with n = 8 gave OS1-64 99.58 / 33.2 (default 99.69 /
-/// 37.6), VLP-16 99.06 / 49.8 (99.37 / 63.9), HDL-32E 98.95 / 45.3 (99.42 /
-/// 63.8), Avia 98.42 / 67.7 (99.18 / 80.1) but HDL-64E 97.30 / 33.0 (99.40 /
-/// 55.0), below the 98 % goal; n = 12 gave HDL-64E 98.20 / 38.0 and n = 16
-/// 98.77 / 42.0, with Avia no better than the default (84.8 / 84.2). No
-/// setting of the two wins on every sensor, so the default stays. Those
-/// 80-keyframe sites turned out to be misaligned between sessions by
-/// 0.3-0.65 m and up to 1° (routes 80 m long barely overlap, so few loops):
-/// HDL-64E's loss there is mostly that. On 150-keyframe sites (seed 3;
-/// ATE 41-187 mm) the default keeps 99.80 % (HDL-64E), 99.77 % (HDL-32E),
-/// 99.69 % (VLP-16) and 99.28 % (Avia) of permanent structure and leaves
-/// 38.7, 45.5, 46.5 and 77.5 % of removed objects' voxels static.
-/// Beams that returned nothing add support of their own on top of this
-/// ([`ChangeConfig::deleted_weight`], `evidence::no_return`).
+/// | sensor (ATE per session) | `omega_or_half_support` | `omega_or_support` |
+/// |---|---|---|
+/// | OS1-64 (48-73 mm) | 99.71 / 30.45 % | 99.35 / 22.39 % |
+/// | HDL-64E (41-74 mm) | 99.80 / 38.62 % | 99.41 / 13.92 % |
+/// | HDL-32E (48-83 mm) | 99.69 / 44.08 % | 99.45 / 18.37 % |
+/// | VLP-16 (64-118 mm) | 99.59 / 45.52 % | 99.31 / 23.36 % |
+/// | Avia (117-187 mm) | 99.28 / 77.54 % | 98.31 / 53.45 % |
+///
+/// `free_support_keyframes = 3` on the demo site: 99.09 / 20.74 %. What it
+/// costs grows with misalignment between sessions: on earlier 80-keyframe
+/// sites whose sessions were 0.3-0.65 m apart (too little route overlap for
+/// loops), `omega_or_support` with n = 8 kept only 97.30 % of HDL-64E's
+/// permanent structure (`omega_or_half_support`: 99.40 %). On a site whose
+/// sessions `seam eval align` (or the loop count in `seam info`) shows
+/// poorly tied together, `omega_or_half_support` (two sessions must see a
+/// voxel empty) is the safer choice. Beams that returned nothing add support
+/// of their own on top of this ([`ChangeConfig::deleted_weight`],
+/// `evidence::no_return`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum DeletedReliability {
@@ -97,10 +98,10 @@ pub enum DeletedReliability {
     /// support alone, so one session seeing the space empty from one
     /// direction cannot take a voxel out of the static map (0.1 → 0.25),
     /// two such sessions can (→ 0.5).
-    #[default]
     OmegaOrHalfSupport,
     /// `w = max(ω_free, s)`: enough keyframes saw the space empty, from
     /// whatever direction. Removes the most; eats the most.
+    #[default]
     OmegaOrSupport,
 }
 
@@ -139,7 +140,7 @@ impl Default for ChangeConfig {
             eps_g_min: 0.1,
             eps_g_max: 0.9,
             static_threshold: 0.5,
-            deleted_reliability: DeletedReliability::OmegaOrHalfSupport,
+            deleted_reliability: DeletedReliability::OmegaOrSupport,
             free_support_keyframes: 5,
         }
     }
@@ -512,6 +513,23 @@ mod tests {
     }
 
     #[test]
+    fn by_default_four_of_five_keyframes_seeing_a_voxel_empty_take_it_out_in_one_session() {
+        let c = ChangeConfig::default();
+        assert_eq!(c.deleted_reliability, DeletedReliability::OmegaOrSupport);
+        // From ε_g's floor, with one-sided free evidence (ω ≈ 0).
+        let after = |free_n: u32, no_return_n: u32| {
+            bayes(0.1, deleted_factor(c.deleted_weight(0.0, free_n, no_return_n) as f32))
+        };
+        let is_static = |eps: f64| eps < c.static_threshold;
+        assert!(is_static(after(3, 0)), "{}", after(3, 0));
+        assert!(!is_static(after(4, 0)), "{}", after(4, 0));
+        assert!(!is_static(after(5, 0)));
+        // Beams that returned nothing count the same way, whatever the rest.
+        assert!(!is_static(after(1, 4)));
+        assert!(is_static(after(1, 3)));
+    }
+
+    #[test]
     fn deleted_reliability_reads_from_toml() {
         let c: ChangeConfig = toml::from_str("deleted_reliability = \"omega_or_support\"").unwrap();
         assert_eq!(c.deleted_reliability, DeletedReliability::OmegaOrSupport);
@@ -531,8 +549,9 @@ mod tests {
 
     #[test]
     fn no_return_support_counts_in_full() {
-        let c = ChangeConfig::default();
-        // Five keyframes of ordinary free evidence from one direction: half support.
+        let c = ChangeConfig { deleted_reliability: DeletedReliability::OmegaOrHalfSupport, ..Default::default() };
+        // Five keyframes of ordinary free evidence from one direction: half
+        // support under `omega_or_half_support`.
         assert_eq!(c.deleted_weight(0.2, 5, 0), 0.5);
         // The same five from beams that returned nothing: full support,
         // enough for one session to take the voxel out of the static map.
