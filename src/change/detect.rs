@@ -79,6 +79,9 @@ pub struct ChangeConfig {
 /// | VLP-16 (64-118 mm) | 99.59 / 45.52 % | 99.31 / 23.36 % |
 /// | Avia (117-187 mm) | 99.28 / 77.54 % | 98.31 / 53.45 % |
 ///
+/// (The Avia row is before no-return evidence for forward sensors; with it,
+/// `omega_or_support` gives 98.29 / 48.00 %.)
+///
 /// `free_support_keyframes = 3` on the demo site: 99.09 / 20.74 %. What it
 /// costs grows with misalignment between sessions: on earlier 80-keyframe
 /// sites whose sessions were 0.3-0.65 m apart (too little route overlap for

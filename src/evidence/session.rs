@@ -118,7 +118,7 @@ pub fn generate(
             (keys, Box3::of_rays(&origin(kf), &pts, v))
         })
         .collect();
-    let no_return_fov = fov.filter(|f| cfg.no_return_range_m > 0.0 && matches!(f, Fov::Band { .. }) && !map.is_empty());
+    let no_return_fov = fov.filter(|_| cfg.no_return_range_m > 0.0 && !map.is_empty());
     let mut submap_box = vec![Box3::EMPTY; n_submaps];
     let mut keys: Vec<u64> = map.iter().map(|p| p.key).collect();
     let reach = (cfg.no_return_range_m / v).ceil() as i32 + 1;
@@ -759,12 +759,20 @@ mod tests {
             assert_eq!(row(p).no_return_n, 0, "{p:?}");
         }
         assert_eq!(out.stats.no_return_voxels, 6);
-        // Without a band (a forward-looking sensor, or unknown) nothing is freed this way.
+        // A forward-looking sensor that did not look that way (the jib is to
+        // the side), or an unknown field of view, frees nothing this way.
         let rect = Fov::Rect { azimuth_deg: 70.0, elevation_deg: 77.0 };
         for fov in [None, Some(&rect)] {
             let out = generate(&inputs, &map, fov, &cfg, |_| {});
             assert_eq!(out.stats.no_return_voxels, 0);
         }
+        // One that looked at it (a jib ahead, along +x) does.
+        let ahead = [40.0, 3.0, 12.0];
+        let with_ahead: Vec<MapPatch> = map.iter().copied().chain([patch(ahead)]).collect();
+        let out = generate(&inputs, &with_ahead, Some(&rect), &cfg, |_| {});
+        assert_eq!(row_in(&out, ahead).no_return_n, 6);
+        assert_eq!(row_in(&out, jib).no_return_n, 0);
+        assert_eq!(out.stats.no_return_voxels, 6);
         // Nor when the map saw it from much closer than this session's beams
         // pass: a surface seen from 20 m may return nothing from 41 m.
         let close: Vec<MapPatch> = map.iter().map(|p| MapPatch { seen_from_m: 20.0, ..*p }).collect();

@@ -108,6 +108,9 @@ use rand::Rng;
 use rayon::prelude::*;
 
 pub use assets::{Part, Surface};
+/// The simulator's beam directions of one frame, for tests of sensor-frame evidence.
+#[cfg(test)]
+pub(crate) use sensor_model::ray_directions;
 pub use shapes::{Shape, ShapeKind};
 pub use site::{ObjectId, SiteObject};
 pub use truth::{GroundTruth, GtSession, read_ground_truth};
