@@ -175,10 +175,10 @@ impl NoReturnImage {
             return false;
         }
         let m = self.margin_deg;
-        if let Some((a, b)) = self.ellipse_deg {
-            if ((az.abs() + m) / a).powi(2) + ((el.abs() + m) / b).powi(2) > 1.0 {
-                return false;
-            }
+        if let Some((a, b)) = self.ellipse_deg
+            && ((az.abs() + m) / a).powi(2) + ((el.abs() + m) / b).powi(2) > 1.0
+        {
+            return false;
         }
         let row = |e: f64| (((e - self.elev_min_deg) / CELL_DEG).floor().max(0.0) as usize).min(self.rows - 1);
         let (r0, r1) = (row(el - m), row(el + m) + 1);
