@@ -5,7 +5,7 @@
 //! with evidence ray cast again on the moved poses.
 //!
 //! ```text
-//! cargo run --release --example reproject_check -- SESSION_DIR [--shift-m 0.3] [--rot-deg 2] [--submap-kf 20] [--seed 1]
+//! cargo run --release --example reproject_check -- SESSION_DIR [--shift-m 0.3] [--rot-deg 2] [--submap-kf 20] [--seed 1] [--voxel-rule]
 //! ```
 //!
 //! Poses: `gt/poses.txt` when present, else the folder's own.
@@ -65,7 +65,12 @@ fn main() -> Result<(), String> {
         })
         .collect();
     let now: Vec<Pose> = inputs.iter().map(|k| motions[k.submap] * k.t_world_keyframe).collect();
-    let cfg = EvidenceConfig::default();
+    // `--voxel-rule`: the paper's free test instead of the surface test.
+    let cfg = if args.iter().any(|a| a == "--voxel-rule") {
+        EvidenceConfig { free_test: seam::evidence::FreeTest::Voxel, ..EvidenceConfig::default() }
+    } else {
+        EvidenceConfig::default()
+    };
     let c = check_reprojection(&inputs, &now, &cfg);
     println!(
         "{}: {} keyframes, {n_sub} submaps moved by {shift_m} m and up to {rot_deg}°",
