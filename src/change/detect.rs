@@ -143,7 +143,7 @@ impl Default for ChangeConfig {
             eps_g_min: 0.1,
             eps_g_max: 0.9,
             static_threshold: 0.5,
-            deleted_reliability: DeletedReliability::OmegaOrSupport,
+            deleted_reliability: DeletedReliability::default(),
             free_support_keyframes: 5,
         }
     }

@@ -151,6 +151,16 @@ impl Box3 {
         b
     }
 
+    /// The keys within `range_m` (plus a voxel) of `origin_m` on every
+    /// axis; empty when the origin is off the grid.
+    pub fn within_range(origin_m: &[f64; 3], range_m: f64, voxel_m: f64) -> Box3 {
+        let reach = (range_m / voxel_m).ceil() as i32 + 1;
+        voxel_key(origin_m, voxel_m).map_or(Box3::EMPTY, |o| Box3 {
+            lo: o.0.map(|c| c.saturating_sub(reach)),
+            hi: o.0.map(|c| c.saturating_add(reach)),
+        })
+    }
+
     /// Shrinks the horizontal extent symmetrically around `centre` until the
     /// box holds at most `max` voxels: voxels far from the sensor then get no
     /// evidence from this keyframe, where their weight q was smallest.
@@ -271,6 +281,21 @@ fn zeroed_atomics(n: usize) -> Box<[AtomicU64]> {
         }
         Box::from_raw(std::ptr::slice_from_raw_parts_mut(ptr, n))
     }
+}
+
+/// From the sensor at `origin_m` to the centre of voxel `k`: the vector and
+/// its length, m.
+fn ray_to_centre(k: VoxelKey, origin_m: &[f64; 3], voxel_m: f64) -> (nalgebra::Vector3<f64>, f64) {
+    let c = k.center_m(voxel_m) - nalgebra::Vector3::from(*origin_m);
+    let r = c.norm();
+    (c, r)
+}
+
+/// Eq. 4's unit direction `u` (zero at the sensor's own voxel centre) and
+/// range weight `q` of a ray to a voxel centre.
+fn direction_and_weight((c, r): (nalgebra::Vector3<f64>, f64), cfg: &EvidenceConfig) -> ([f32; 3], f32) {
+    let u = if r > 0.0 { [0, 1, 2].map(|a| (c[a] / r) as f32) } else { [0.0; 3] };
+    (u, cfg.range_weight(r) as f32)
 }
 
 /// One voxel's running evidence while keyframes are added (76 bytes).
@@ -563,9 +588,10 @@ impl InterestEvidence {
     /// returned nothing, ascending.
     fn no_return_rows(&self, origin_m: &[f64; 3], nr: &NoReturn<'_>) -> Vec<u32> {
         let v = self.voxel_m;
-        let reach = (nr.range_m / v).ceil() as i32 + 1;
-        let Some(o) = voxel_key(origin_m, v) else { return Vec::new() };
-        let b = Box3 { lo: o.0.map(|c| c.saturating_sub(reach)), hi: o.0.map(|c| c.saturating_add(reach)) };
+        let b = Box3::within_range(origin_m, nr.range_m, v);
+        if b.is_empty() {
+            return Vec::new();
+        }
         let (lo, hi) = self.x_range(&b);
         let from = nr.candidates.partition_point(|&i| (i as usize) < lo);
         let to = nr.candidates.partition_point(|&i| (i as usize) < hi);
@@ -575,9 +601,7 @@ impl InterestEvidence {
             .into_par_iter()
             .with_min_len(1024)
             .filter(|&j| {
-                let k = unpack(self.keys[nr.candidates[j] as usize]).0;
-                let c = nalgebra::Vector3::from([0, 1, 2].map(|a| (k[a] as f64 + 0.5) * v - origin_m[a]));
-                let r = c.norm();
+                let (c, r) = ray_to_centre(unpack(self.keys[nr.candidates[j] as usize]), origin_m, v);
                 if !(r > v && r <= nr.range_m.min(nr.candidate_range_m[j] as f64)) || c.z < min_sin * r {
                     return false;
                 }
@@ -592,11 +616,7 @@ impl InterestEvidence {
         let v = self.voxel_m;
         let (_, l_miss, l_min, l_max) = cfg.log_odds.log_odds();
         for &i in rows {
-            let k = unpack(self.keys[i as usize]).0;
-            let c = [0, 1, 2].map(|a| (k[a] as f64 + 0.5) * v - origin_m[a]);
-            let r = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
-            let u = c.map(|x| (x / r) as f32);
-            let q = cfg.range_weight(r) as f32;
+            let (u, q) = direction_and_weight(ray_to_centre(unpack(self.keys[i as usize]), origin_m, v), cfg);
             let row = &mut self.rows[i as usize];
             Row::add(&mut row.free_n, &mut row.free_q, &mut row.free_m, q, u);
             row.no_return_n += 1;
@@ -651,10 +671,7 @@ impl InterestEvidence {
                         return;
                     }
                 }
-                let c = [0, 1, 2].map(|a| (k[a] as f64 + 0.5) * v - origin_m[a]);
-                let r = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
-                let u = if r > 0.0 { c.map(|x| (x / r) as f32) } else { [0.0; 3] };
-                let q = cfg.range_weight(r) as f32;
+                let (u, q) = direction_and_weight(ray_to_centre(VoxelKey(k), origin_m, v), cfg);
                 if kinds & HIT != 0 {
                     Row::add(&mut row.hit_n, &mut row.hit_q, &mut row.hit_m, q, u);
                     *lo_odds = (*lo_odds + l_hit).clamp(l_min, l_max);

@@ -93,10 +93,9 @@ fn origin(kf: &KeyframeInput<'_>) -> [f64; 3] {
 /// change detection compares against — with the patch of points each had,
 /// which this session's rays must cross to free it (`evidence::surface`).
 ///
-/// `fov` is the session's sensor field of view; with a spinning sensor's
-/// band, the beams that returned nothing free the map voxels this session's
-/// points do not occupy (`evidence::no_return`, up to
-/// `cfg.no_return_range_m`).
+/// `fov` is the session's sensor field of view; with it, the beams that
+/// returned nothing free the map voxels this session's points do not occupy
+/// (`evidence::no_return`, up to `cfg.no_return_range_m`).
 pub fn generate(
     keyframes: &[KeyframeInput<'_>],
     map: &[MapPatch],
@@ -121,11 +120,11 @@ pub fn generate(
     let no_return_fov = fov.filter(|_| cfg.no_return_range_m > 0.0 && !map.is_empty());
     let mut submap_box = vec![Box3::EMPTY; n_submaps];
     let mut keys: Vec<u64> = map.iter().map(|p| p.key).collect();
-    let reach = (cfg.no_return_range_m / v).ceil() as i32 + 1;
     for (kf, (k, b)) in keyframes.iter().zip(&per_kf) {
         submap_box[kf.submap] = submap_box[kf.submap].union(b);
-        if let (Some(_), Some(o)) = (no_return_fov, voxel_key(&origin(kf), v)) {
-            let around = Box3 { lo: o.0.map(|c| c.saturating_sub(reach)), hi: o.0.map(|c| c.saturating_add(reach)) };
+        if no_return_fov.is_some() {
+            // The map voxels this keyframe's no-return beams may free.
+            let around = Box3::within_range(&origin(kf), cfg.no_return_range_m, v);
             submap_box[kf.submap] = submap_box[kf.submap].union(&around);
         }
         keys.extend_from_slice(k);

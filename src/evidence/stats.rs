@@ -95,8 +95,8 @@ pub struct EvidenceConfig {
     pub surface_map_min_points: u32,
     /// Beams that returned nothing free the earlier sessions' map voxels
     /// within this range that this session's points do not occupy
-    /// (`evidence::no_return`); only change detection sees it. Spinning
-    /// sensors only (the session's field of view is a band). 0 disables.
+    /// (`evidence::no_return`); only change detection sees it. A spinning
+    /// sensor's band or a forward sensor's field of view. 0 disables.
     pub no_return_range_m: f64,
     /// ... and only voxels with none of this session's points within about
     /// this distance (cells of this size, the voxel's and its 26
