@@ -282,6 +282,12 @@ fn bad_evidence_settings_and_dor_inputs() {
     std::fs::write(&free_test, "[evidence]\nfree_test = \"ray\"\n").unwrap();
     let support = t.path().join("support.toml");
     std::fs::write(&support, "[change]\nfree_support_keyframes = 0\n").unwrap();
+    let nr_range = t.path().join("nr_range.toml");
+    std::fs::write(&nr_range, "[evidence]\nno_return_range_m = -1.0\n").unwrap();
+    let nr_margin = t.path().join("nr_margin.toml");
+    std::fs::write(&nr_margin, "[evidence]\nno_return_margin_deg = 0.0\n").unwrap();
+    let nr_elevation = t.path().join("nr_elevation.toml");
+    std::fs::write(&nr_elevation, "[evidence]\nno_return_min_elevation_deg = 120.0\n").unwrap();
     for (cfg, fragment) in [
         (&model, "octomap"),
         (&clearance, "free_clearance_m"),
@@ -291,6 +297,9 @@ fn bad_evidence_settings_and_dor_inputs() {
         (&tolerance, "surface_tolerance_m"),
         (&free_test, "surface"),
         (&support, "free_support_keyframes"),
+        (&nr_range, "no_return_range_m"),
+        (&nr_margin, "no_return_margin_deg"),
+        (&nr_elevation, "no_return_min_elevation_deg"),
     ] {
         let o = run(&["--config", cfg.to_str().unwrap(), "ingest", st, dir]);
         assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
