@@ -5,14 +5,28 @@
 //! with evidence ray cast again on the moved poses.
 //!
 //! ```text
-//! cargo run --release --example reproject_check -- SESSION_DIR [--shift-m 0.3] [--rot-deg 2] [--submap-kf 20] [--seed 1] [--voxel-rule]
+//! cargo run --release --example reproject_check -- SESSION_DIR [--shift-m 0.3] [--rot-deg 2] [--submap-kf 20] [--seed 1] [--voxel-rule] [--config FILE]
 //! ```
 //!
-//! Poses: `gt/poses.txt` when present, else the folder's own.
+//! Poses: `gt/poses.txt` when present, else the folder's own. `--config`
+//! takes a seam configuration file and uses its `[evidence]` settings.
 //! `--submap-kf` larger than the session moves the whole session rigidly.
 //! Submaps moved apart independently disagree more: evidence is kept only on
 //! the voxels some point occupies, so a submap's free evidence about where
 //! another submap's points now lie was never stored.
+
+//!
+//! Measured with `--submap-kf 1000` (the session moved rigidly by 0.3 m and
+//! up to 2°), session 2 of each 150-keyframe site (seed 3; OS1-64: the demo
+//! site), same voxel and same verdict: OS1-64 93.92 %, HDL-64E 97.18 %,
+//! HDL-32E 96.41 %, VLP-16 96.41 %, Avia 97.27 %; SemanticKITTI 04 (10
+//! scans) 98.37 %. Within one voxel: 98.7-99.3 %. Most of the disagreements
+//! are fringe voxels one keyframe hit (57 % on the OS1-64, 74-88 %
+//! elsewhere): re-binning hands them the hits of the voxels whose box of
+//! points they now overlap. Neither weighting the spread rows by the share
+//! of their box in each voxel nor merging them by maximum instead of sum
+//! did better (93.44 % and 93.33 % on the OS1-64), and the ω floor is not
+//! the cause (93.84 % with eq. 5's ω and n_sat = 5).
 
 use nalgebra::{Translation3, UnitQuaternion, Vector3};
 use rand::{Rng, SeedableRng};
@@ -65,11 +79,15 @@ fn main() -> Result<(), String> {
         })
         .collect();
     let now: Vec<Pose> = inputs.iter().map(|k| motions[k.submap] * k.t_world_keyframe).collect();
+    let base = match args.iter().position(|a| a == "--config").and_then(|i| args.get(i + 1)) {
+        Some(path) => seam::config::Config::from_file(std::path::Path::new(path)).map_err(|e| e.to_string())?.evidence,
+        None => EvidenceConfig::default(),
+    };
     // `--voxel-rule`: the paper's free test instead of the surface test.
     let cfg = if args.iter().any(|a| a == "--voxel-rule") {
-        EvidenceConfig { free_test: seam::evidence::FreeTest::Voxel, ..EvidenceConfig::default() }
+        EvidenceConfig { free_test: seam::evidence::FreeTest::Voxel, ..base }
     } else {
-        EvidenceConfig::default()
+        base
     };
     let c = check_reprojection(&inputs, &now, &cfg);
     println!(
@@ -87,6 +105,13 @@ fn main() -> Result<(), String> {
         100.0 * c.match_fraction
     );
     println!("within one voxel, same verdict: {:.2} %", 100.0 * c.neighbour_match_fraction);
+    let disagree = (c.same_voxel - c.same_voxel_and_verdict).max(1) as f64;
+    println!(
+        "same voxel, other verdict: {} ({:.1} % of them hit by one keyframe on recomputation, {:.1} % dynamic there and static reprojected)",
+        c.same_voxel - c.same_voxel_and_verdict,
+        100.0 * c.disagree_single_hit as f64 / disagree,
+        100.0 * c.disagree_dynamic_recomputed as f64 / disagree
+    );
     println!(
         "reprojected occupied voxels also occupied on recomputation: {} ({:.2} %)",
         c.reprojected_also_recomputed,

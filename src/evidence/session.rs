@@ -496,6 +496,14 @@ pub struct ReprojectionCheck {
     pub same_voxel: usize,
     /// ... and get the same dynamic verdict (ε_l > τ_dyn).
     pub same_voxel_and_verdict: usize,
+    /// Of the recomputed occupied voxels found occupied after reprojection
+    /// but with the other verdict: those one keyframe alone hit on
+    /// recomputation (a point at a surface's fringe that other keyframes'
+    /// rays pass by; re-binning hands it the hits of the voxels whose
+    /// points' box it now overlaps), ...
+    pub disagree_single_hit: usize,
+    /// ... and those dynamic on recomputation, static after reprojection.
+    pub disagree_dynamic_recomputed: usize,
     /// `same_voxel_and_verdict / occupied_recomputed`.
     pub match_fraction: f64,
     /// Recomputed occupied voxels with a reprojected occupied voxel of the
@@ -549,7 +557,12 @@ pub fn check_reprojection(inputs: &[KeyframeInput<'_>], poses_now: &[Pose], cfg:
         let verdict = dynamic(fresh_eps[i]);
         if let Some(j) = occupied(&moved, k) {
             out.same_voxel += 1;
-            out.same_voxel_and_verdict += (dynamic(moved_eps[j]) == verdict) as usize;
+            if dynamic(moved_eps[j]) == verdict {
+                out.same_voxel_and_verdict += 1;
+            } else {
+                out.disagree_single_hit += (r.hit_n == 1) as usize;
+                out.disagree_dynamic_recomputed += verdict as usize;
+            }
         }
         let same = |j: usize| dynamic(moved_eps[j]) == verdict;
         let found = occupied(&moved, k).is_some_and(same)
