@@ -80,7 +80,10 @@ pub struct ChangeConfig {
 /// | Avia (117-187 mm) | 99.28 / 77.54 % | 98.31 / 53.45 % |
 ///
 /// (The Avia row is before no-return evidence for forward sensors; with it,
-/// `omega_or_support` gives 98.29 / 48.00 %.)
+/// `omega_or_support` gives 98.29 / 48.00 %. The table predates
+/// `evidence.n_sat` = 2 and `free_clearance_m` = 0.2 m, which leave a few
+/// points fewer removed-object voxels static on every row: see
+/// `EvidenceConfig::n_sat`.)
 ///
 /// `free_support_keyframes = 3` on the demo site: 99.09 / 20.74 %. What it
 /// costs grows with misalignment between sessions: on earlier 80-keyframe

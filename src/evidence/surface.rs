@@ -27,7 +27,7 @@
 //! - those one keyframe hit, if its points spread at least
 //!   `surface_single_sigma_m` (σ) both ways in their plane: a person's legs
 //!   seen once, not one ring's line of road. Rays free these below the ground
-//!   clearance too, which is what lets the lowest 0.3 m of a mover go
+//!   clearance too, which is what lets the lowest 0.2 m of a mover go
 //!   (simulated OS1-64: RR 70.2 → 74.2 % at the same PR; KITTI 04 73.9 →
 //!   75.2 %);
 //! - not the others, nor voxels with none of this session's points (an
