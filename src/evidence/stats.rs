@@ -26,10 +26,11 @@ pub struct EvidenceConfig {
     pub n0: f64,
     /// Observing keyframes at which the support s saturates (eq. 7).
     /// MATH.md's choice is 5; seam uses 2 with `free_clearance_m` 0.2 m (was
-    /// 3 and 0.3 m). Point-wise F1 of `bench/dor_vs_dufomap.py`, one run:
-    /// SemanticKITTI 04 85.74 → 89.13 (PR 99.74 → 99.45), 08 10.59 → 14.92
-    /// (PR 99.53 → 99.21), against DUFOMap's default 86.90 and 12.88 in the
-    /// same run; simulated 60-keyframe sessions OS1-64 84.5 → 88.2, HDL-64E
+    /// 3 and 0.3 m). Point-wise F1 of `bench/dor_vs_dufomap.py`, a run with
+    /// the old defaults → one with the new: SemanticKITTI 04 85.74 → 89.13
+    /// (PR 99.74 → 99.45), 08 10.59 → 14.92 (PR 99.53 → 99.21), against
+    /// DUFOMap's default 86.87 and 12.88 in the run with the new; the bench's
+    /// simulated 60-keyframe sessions (seed 1) OS1-64 84.5 → 88.2, HDL-64E
     /// 89.3 → 91.3, VLP-16 77.7 → 83.7, HDL-32E 79.4 → 84.8, Avia 86.8 →
     /// 91.2, PR ≥ 99.0 % except the Avia's (98.06 → 97.78 %). Each of the two
     /// changes alone gets about half of it. Change detection on the demo site
