@@ -80,11 +80,13 @@ fn sessions_are_aligned_jointly_within_a_decimetre() {
         assert!(met, "{name}: {value:.4} misses its goal: {}", report["goals"]);
     }
     // Seeing a removed object's space free must lower what is left of it:
-    // 17.3 % here when written (4 × 150 keyframes), 30-46 % on such sites
-    // under the earlier default, `omega_or_half_support`.
+    // 14.2 % here (4 × 150 keyframes); 17.3 % when first written, before
+    // `[change] off_surface_m` (a removed pallet's layer above the ground
+    // stayed coexist) and the evidence defaults of `n_sat` 2; 30-46 % on
+    // such sites under `omega_or_half_support`.
     let (left, _) = goal("removed-object voxels left in the static map");
     eprintln!("removed-object voxels left static: {left:.4}");
-    assert!(left < 0.25, "removed objects stay in the static map: {left:.3}");
+    assert!(left < 0.16, "removed objects stay in the static map: {left:.3}");
 }
 
 /// A session that shares nothing with the store is kept, unaligned, with the

@@ -120,9 +120,14 @@ pub(super) fn changes(ctx: &mut StepCtx<'_>, step: &'static str, seq: i64) -> Re
         "update_s": update_s,
     });
     ctx.commit(step, seq, (&started_at, t0), |tx| {
+        let t_write = Instant::now();
         store::replace_lifelong_map(tx, &map, version, session)?;
+        let map_write_s = t_write.elapsed().as_secs_f64();
         store::insert_change_events(tx, &events)?;
         store::insert_session_changes(tx, session, version, &stats)?;
+        let mut details = details;
+        details["map_write_s"] = json!(map_write_s);
+        details["events_write_s"] = json!(t_write.elapsed().as_secs_f64() - map_write_s);
         Ok((session, details))
     })
 }
