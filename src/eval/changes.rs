@@ -71,13 +71,16 @@
 //!    sessions `(a, b)` of `S`, each static object present in `a` and absent
 //!    in `b` (*removed*) is right when a `deleted_overlap` event of session
 //!    `b` lies in its region against `b`; each object absent in `a` and
-//!    present in `b` (*appeared*) is right when an `emerged_overlap` or
-//!    `emerged_non_overlap` event of session `b` lies in its region against
-//!    `a`. Scored only when the map shows the object: a removed one with at
-//!    least `min_voxels` region voxels first seen before `b`, an appeared one
-//!    with at least `min_voxels` region voxels first seen in `b`; the others
-//!    are counted as unscored. Each change lists the events in its region by
-//!    session and category, and how far its session's route passed.
+//!    present in `b` (*appeared*) is right when an `emerged_overlap`,
+//!    `emerged_non_overlap` or `coexist` event of session `b` lies in its
+//!    region against `a` (a coexist event is a voxel seen empty in the
+//!    session before and occupied again, "returned" in queries: an object
+//!    put where another had been taken away). Scored only when the map
+//!    shows the object: a removed one with at least `min_voxels` region
+//!    voxels first seen before `b`, an appeared one with at least
+//!    `min_voxels` region voxels first seen in `b`; the others are counted
+//!    as unscored. Each change lists the events in its region by session and
+//!    category, and how far its session's route passed.
 
 use super::EvalError;
 use super::align::{rmse_after, umeyama};
@@ -682,7 +685,9 @@ pub fn score(
                 if case.removed {
                     c == Category::DeletedOverlap
                 } else {
-                    matches!(c, Category::EmergedOverlap | Category::EmergedNonOverlap)
+                    // A voxel seen empty the session before and occupied
+                    // now comes back as a coexist event ("returned").
+                    matches!(c, Category::EmergedOverlap | Category::EmergedNonOverlap | Category::Coexist)
                 }
             };
             let correct = scored && ev.iter().any(|(&(s, c), &n)| s == case.session && right(c) && n > 0);
@@ -1229,15 +1234,18 @@ mod tests {
         let came = Shape::cuboid([10.0, 0.0, 1.0], [2.0, 2.0, 2.0], 0.0);
         let late = Shape::cuboid([20.0, 0.0, 1.0], [2.0, 2.0, 2.0], 0.0);
         let unseen = Shape::cuboid([30.0, 0.0, 1.0], [2.0, 2.0, 2.0], 0.0);
+        let back = Shape::cuboid([40.0, 0.0, 1.0], [2.0, 2.0, 2.0], 0.0);
         let objects = vec![
             object(1, &[1], vec![gone]),
             object(2, &[2, 3], vec![came]),
             object(3, &[1, 2], vec![late]),
             object(4, &[3], vec![unseen]),
+            object(5, &[3], vec![back]),
         ];
         let mut voxels = fill([-0.6, -0.6, 0.6], [0.6, 0.6, 1.2], false, 1);
         voxels.extend(fill([9.4, -0.6, 0.6], [10.6, 0.6, 1.2], true, 2));
         voxels.extend(fill([19.4, -0.6, 0.6], [20.6, 0.6, 1.2], true, 1));
+        voxels.extend(fill([39.4, -0.6, 0.6], [40.6, 0.6, 1.2], true, 3));
         let ev = |session, x: f64, category| EvalEvent { session, xyz: [x, 0.1, 1.0], category };
         let events = vec![
             ev(2, 0.1, Category::DeletedOverlap),       // right
@@ -1247,6 +1255,8 @@ mod tests {
             ev(2, 10.1, Category::DeletedOverlap),      // noise, ignored
             ev(3, 30.1, Category::EmergedNonOverlap),   // object 4 has no voxels
             ev(2, 0.1 + 5.0, Category::DeletedOverlap), // outside every object
+            ev(3, 20.1, Category::Coexist),             // came back: no removal
+            ev(3, 40.1, Category::Coexist),             // came back where object 5 appeared: right
         ];
         let s = score(&[1, 2, 3], &objects, &[], &voxels, &events, &cfg());
         let got: Vec<(u32, &str, usize, bool, bool)> =
@@ -1258,15 +1268,17 @@ mod tests {
                 (2, "appeared", 2, true, true),
                 (3, "removed", 3, true, false),
                 (4, "appeared", 3, false, false),
+                (5, "appeared", 3, true, true),
             ]
         );
-        assert_eq!(s.events_correct, Fraction::new(2, 3));
+        assert_eq!(s.events_correct, Fraction::new(3, 4));
         assert_eq!(s.events_removed_correct, Fraction::new(1, 2));
-        assert_eq!(s.events_appeared_correct, Fraction::new(1, 1));
+        assert_eq!(s.events_appeared_correct, Fraction::new(2, 2));
         assert_eq!(s.events_unscored, 1);
         let three = &s.changes[2].events;
-        assert_eq!(three.len(), 2);
-        assert_eq!((three[1].session, three[1].category.as_str(), three[1].count), (3, "deleted_non_overlap", 1));
+        assert_eq!(three.len(), 3);
+        assert_eq!((three[1].session, three[1].category.as_str()), (3, "coexist"));
+        assert_eq!((three[2].session, three[2].category.as_str(), three[2].count), (3, "deleted_non_overlap", 1));
     }
 
     /// The goals read the fractions; nothing measured is neither met nor missed.
