@@ -3,7 +3,10 @@ how busy other processes kept the machine while something was timed (a
 speed measured on a busy machine is flagged, not trusted)."""
 
 import os
+import shutil
+import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -49,3 +52,27 @@ class OtherLoad:
         if self.sys0 is None or sys1 is None or t1 <= self.t0:
             return None
         return max(0.0, ((sys1 - self.sys0) - (own1 - self.own0)) / (t1 - self.t0))
+
+
+# ---------------------------------------------------------------- the seam binary and the work folder
+
+
+def seam_in_work(tool, seam_path, no_build, out, prefix):
+    """Runs `cargo build --release` (unless `no_build`), makes the work folder
+    (`out`, or a temporary one) and copies the seam binary into it, so that a
+    concurrent `cargo build` cannot swap it mid-run. Returns (work, binary)."""
+    root = Path(__file__).resolve().parents[1]
+    if not no_build:
+        log("cargo build --release")
+        if subprocess.run(["cargo", "build", "--release", "--quiet"], cwd=root).returncode != 0:
+            sys.exit(f"{tool}: `cargo build --release` failed; fix the build or pass --no-build "
+                     "to use the existing binary")
+    exe = Path(seam_path)
+    if not exe.is_file():
+        sys.exit(f"{tool}: no seam binary at {exe}: run `cargo build --release` or pass --seam PATH")
+    work = Path(out) if out else Path(tempfile.mkdtemp(prefix=prefix))
+    work.mkdir(parents=True, exist_ok=True)
+    work = work.resolve()
+    binary = work / "seam-bin"
+    shutil.copy2(exe, binary)
+    return work, binary

@@ -60,11 +60,10 @@ import os
 import shutil
 import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
-from benchcommon import BUSY_FLAG, OtherLoad, SeamError, log
+from benchcommon import BUSY_FLAG, OtherLoad, SeamError, log, seam_in_work
 
 import numpy as np
 
@@ -433,6 +432,26 @@ def parse_cfgs(s):
     return cfgs
 
 
+def datasets_of(args, work, seam, tool):
+    """(name, session folder) of every dataset `--kitti` and `--sensors`
+    ask for; each simulated session made here (`seam simulate --sessions 1`)."""
+    datasets = []
+    for seq in filter(None, (s.strip() for s in args.kitti.split(","))):
+        d = Path(args.kitti_root) / seq
+        if not (d / "velodyne").is_dir():
+            sys.exit(f"{tool}: {d} is not a KITTI sequence folder (velodyne/, poses.txt, labels/)")
+        datasets.append((f"kitti-{seq}", d.resolve()))
+    for sensor in filter(None, (s.strip() for s in args.sensors.split(","))):
+        sim = work / "sim" / sensor
+        if sim.exists():
+            shutil.rmtree(sim)
+        log(f"[sim-{sensor}] simulate {args.keyframes} keyframes")
+        seam.run("simulate", sim, "--sessions", 1, "--sensor", sensor, "--keyframes", args.keyframes,
+                 "--seed", args.seed)
+        datasets.append((f"sim-{sensor}", sim / "session_01"))
+    return datasets
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--kitti", default="04,08", help="SemanticKITTI sequences ('' for none)")
@@ -453,22 +472,9 @@ def main():
     args = ap.parse_args()
     args.dufomap_cfgs = args.dufomap
 
-    if not args.no_build:
-        log("cargo build --release")
-        if subprocess.run(["cargo", "build", "--release", "--quiet"], cwd=ROOT).returncode != 0:
-            sys.exit("dor_vs_dufomap: `cargo build --release` failed; fix the build or pass --no-build "
-                     "to use the existing binary")
-    exe = Path(args.seam)
-    if not exe.is_file():
-        sys.exit(f"dor_vs_dufomap: no seam binary at {exe}: run `cargo build --release` or pass --seam PATH")
     load_before = os.getloadavg()
     t_start = time.perf_counter()
-
-    work = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="dor_vs_dufomap-"))
-    work.mkdir(parents=True, exist_ok=True)
-    work = work.resolve()
-    exe_copy = work / "seam-bin"  # one binary for the whole run, whatever `cargo build` does meanwhile
-    shutil.copy2(exe, exe_copy)
+    work, exe_copy = seam_in_work("dor_vs_dufomap", args.seam, args.no_build, args.out, "dor_vs_dufomap-")
     seam = Seam(exe_copy, args.threads)
     eval_ok = seam.has_eval_dor()
     if not eval_ok:
@@ -494,20 +500,7 @@ def main():
     scalar_cfg, scalar_note = variant_config("seam-scalar", "log_odds", SCALAR_TOML)
     voxel_cfg, _ = variant_config("seam voxel-rule", "voxel_rule", VOXEL_TOML)
 
-    datasets = []
-    for seq in filter(None, (s.strip() for s in args.kitti.split(","))):
-        d = Path(args.kitti_root) / seq
-        if not (d / "velodyne").is_dir():
-            sys.exit(f"dor_vs_dufomap: {d} is not a KITTI sequence folder (velodyne/, poses.txt, labels/)")
-        datasets.append((f"kitti-{seq}", d.resolve()))
-    for sensor in filter(None, (s.strip() for s in args.sensors.split(","))):
-        sim = work / "sim" / sensor
-        if sim.exists():
-            shutil.rmtree(sim)
-        log(f"[sim-{sensor}] simulate {args.keyframes} keyframes")
-        seam.run("simulate", sim, "--sessions", 1, "--sensor", sensor, "--keyframes", args.keyframes,
-                 "--seed", args.seed)
-        datasets.append((f"sim-{sensor}", sim / "session_01"))
+    datasets = datasets_of(args, work, seam, "dor_vs_dufomap")
 
     results = []
     for name, d in datasets:

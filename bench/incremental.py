@@ -49,11 +49,10 @@ import os
 import shutil
 import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
-from benchcommon import BUSY_FLAG, OtherLoad, SeamError, log
+from benchcommon import BUSY_FLAG, OtherLoad, SeamError, log, seam_in_work
 
 ROOT = Path(__file__).resolve().parents[1]
 MERGE = ("coarse_align", "loops", "optimize")
@@ -207,20 +206,7 @@ def main():
     if args.sessions < 2 or keyframes < 2:
         sys.exit("incremental: --sessions must be at least 2 and --keyframes at least 2")
 
-    if not args.no_build:
-        log("cargo build --release")
-        if subprocess.run(["cargo", "build", "--release", "--quiet"], cwd=ROOT).returncode != 0:
-            sys.exit("incremental: `cargo build --release` failed; fix the build or pass --no-build "
-                     "to use the existing binary")
-    exe = Path(args.seam)
-    if not exe.is_file():
-        sys.exit(f"incremental: no seam binary at {exe}: run `cargo build --release` or pass --seam PATH")
-
-    work = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="seam-incremental-"))
-    work.mkdir(parents=True, exist_ok=True)
-    work = work.resolve()
-    exe_copy = work / "seam-bin"
-    shutil.copy2(exe, exe_copy)
+    work, exe_copy = seam_in_work("incremental", args.seam, args.no_build, args.out, "seam-incremental-")
     seam = Seam(exe_copy, work, args.threads)
     if seam.time_v is None:
         log(f"note: {TIME_V} not found: no peak memory")
