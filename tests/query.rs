@@ -193,16 +193,28 @@ fn raw_loops(tx: &rusqlite::Connection) {
     .unwrap();
 }
 
+/// A fresh folder for a store shared by the tests of this binary, under
+/// cargo's `target/tmp`: a `TempDir` in a static is never dropped, so one in
+/// the system's temp folder would be left behind by every run (600 MB for
+/// the simulated store). This one is replaced by the next run and goes with
+/// `cargo clean`.
+fn fixture_dir(name: &str) -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("query-{name}"));
+    if dir.exists() {
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
 /// The synthetic store, built once per test binary and only read after.
 fn synthetic() -> &'static Path {
-    static STORE: OnceLock<(tempfile::TempDir, PathBuf)> = OnceLock::new();
-    let (_, root) = STORE.get_or_init(|| {
-        let dir = tempfile::tempdir().unwrap();
-        let root = dir.path().join("synthetic.seam");
+    static STORE: OnceLock<PathBuf> = OnceLock::new();
+    STORE.get_or_init(|| {
+        let root = fixture_dir("synthetic").join("synthetic.seam");
         build_synthetic(&root);
-        (dir, root)
-    });
-    root
+        root
+    })
 }
 
 /// Compiles and runs a query on a store through the library.
@@ -990,14 +1002,14 @@ fn cli_zones_add_list_rm() {
 /// A simulated 3-session site, ingested through the binary, with the zones
 /// the example queries name.
 fn simulated() -> &'static Path {
-    static STORE: OnceLock<(tempfile::TempDir, PathBuf)> = OnceLock::new();
-    let (_, root) = STORE.get_or_init(|| {
-        let dir = tempfile::tempdir().unwrap();
-        let sim = dir.path().join("sim");
+    static STORE: OnceLock<PathBuf> = OnceLock::new();
+    STORE.get_or_init(|| {
+        let dir = fixture_dir("simulated");
+        let sim = dir.join("sim");
         let o =
             run(&["simulate", sim.to_str().unwrap(), "--sessions", "3", "--keyframes", "80", "--seed", "3", "--quiet"]);
         assert!(o.status.success(), "{}", stderr(&o));
-        let root = dir.path().join("site.seam");
+        let root = dir.join("site.seam");
         init_store(&root);
         let st = root.to_str().unwrap();
         for s in 1..=3 {
@@ -1011,9 +1023,10 @@ fn simulated() -> &'static Path {
             let o = run(&args);
             assert!(o.status.success(), "{}", stderr(&o));
         }
-        (dir, root)
-    });
-    root
+        // The queries read only the store; the scans are 180 MB.
+        std::fs::remove_dir_all(&sim).unwrap();
+        root
+    })
 }
 
 const STOCKPILE: &str = "POLYGON((-22 12, -10 11, -9 21, -16 24, -23 19))";
