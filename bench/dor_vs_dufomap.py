@@ -19,7 +19,13 @@ Per dataset:
    ("seam", directional evidence with the surface free test), into another
    with `[evidence] model = "log_odds"` ("seam-scalar", same rays and test)
    and into a third with `[evidence] free_test = "voxel"` ("seam
-   voxel-rule": the paper's rule, every voxel a ray crosses is free).
+   voxel-rule": the paper's rule, every voxel a ray crosses is free), and
+   into a fourth with CEILING_TOML ("any-free-ray ceiling": a point is
+   removed as soon as any ray of another keyframe crossed its voxel, with no
+   guard, no clearance, no surface test and no weighing against hits). That
+   row's PR is meaningless; its RR is the share of moving points that any
+   method removing only space some ray saw empty can reach at 0.2 m, and
+   2·RR/(1+RR) the F1 it allows at a PR of 100 %.
 2. `seam poses STORE --session NAME --format kitti` (and `--format json`
    for the keyframe indices) of the seam store: the LiDAR world poses DUFOMap
    gets, so both see the same scans at the same poses.
@@ -81,6 +87,11 @@ SCALAR_TOML = '[evidence]\nmodel = "log_odds"\n'
 # seam without its surface free test: the paper's voxel rule (every voxel a
 # ray crosses is free), to measure what the test buys.
 VOXEL_TOML = '[evidence]\nfree_test = "voxel"\n'
+# Every voxel any ray of another keyframe crossed is dynamic: ε_l > 0 iff the
+# voxel has free evidence (ω's floor 1 so one direction counts; the lower
+# clamp 0 so τ_dyn just above 0 separates f = 0 from f > 0).
+CEILING_TOML = ('[evidence]\nfree_test = "voxel"\nfree_guard_voxels = 0\nfree_clearance_m = 0\n'
+                'omega_floor = 1\neps_min = 0\ntau_dyn = 0.000001\n')
 SENSORS = "os1-64,hdl-64e,vlp16,hdl-32e,avia"
 DUFOMAP_DEFAULT = "0.1,0.2,1;0.1,0.2,2;0.2,0.2,1"
 
@@ -273,7 +284,7 @@ def eval_dor(seam, store, labels_dir, session, predicted=None, config=None):
     return seam.json(*args, config=config)
 
 
-def dataset_rows(args, seam, name, dir_, work, eval_ok, scalar_cfg, voxel_cfg):
+def dataset_rows(args, seam, name, dir_, work, eval_ok, variants):
     out = {"dataset": name, "dir": str(dir_), "rows": [], "errors": []}
     stores = work / "stores" / name
     stores.mkdir(parents=True, exist_ok=True)
@@ -307,7 +318,7 @@ def dataset_rows(args, seam, name, dir_, work, eval_ok, scalar_cfg, voxel_cfg):
         return row
 
     out["rows"].append(seam_row("seam", stores / "seam.seam", None, "directional"))
-    for method, cfg, model in (("seam-scalar", scalar_cfg, "log_odds"), ("seam voxel-rule", voxel_cfg, "directional")):
+    for method, cfg, model in variants:
         if cfg is None:
             out["rows"].append({"method": method, "skipped": "seam rejects its config (see above)"})
             continue
@@ -499,13 +510,16 @@ def main():
 
     scalar_cfg, scalar_note = variant_config("seam-scalar", "log_odds", SCALAR_TOML)
     voxel_cfg, _ = variant_config("seam voxel-rule", "voxel_rule", VOXEL_TOML)
+    ceiling_cfg, _ = variant_config("any-free-ray ceiling", "ceiling", CEILING_TOML)
+    variants = [("seam-scalar", scalar_cfg, "log_odds"), ("seam voxel-rule", voxel_cfg, "directional"),
+                ("any-free-ray ceiling", ceiling_cfg, "directional")]
 
     datasets = datasets_of(args, work, seam, "dor_vs_dufomap")
 
     results = []
     for name, d in datasets:
         try:
-            results.append(dataset_rows(args, seam, name, d, work, eval_ok, scalar_cfg, voxel_cfg))
+            results.append(dataset_rows(args, seam, name, d, work, eval_ok, variants))
         except SeamError as e:
             log(f"[{name}] skipped: {e}")
             results.append({"dataset": name, "dir": str(d), "rows": [], "errors": [str(e)]})
@@ -517,7 +531,7 @@ def main():
         import dufomap as dufomap_pkg
 
         doc = {
-            "seam": str(exe), "dufomap_version": getattr(dufomap_pkg, "__version__", None),
+            "seam": str(exe_copy), "dufomap_version": getattr(dufomap_pkg, "__version__", None),
             "threads": args.threads, "cpus": os.cpu_count(), "keyframes": args.keyframes, "seed": args.seed,
             "sensors": args.sensors, "kitti": args.kitti, "load_before": load_before, "load_after": os.getloadavg(),
             "runtime_s": time.perf_counter() - t_start,
