@@ -33,7 +33,7 @@
 
 use super::lifelong::{Category, ChangeEvent, LifelongMap, MapVoxel};
 use crate::evidence::grid::{pack, unpack};
-use crate::geometry::{SYM3_PAIRS, Sym3, UNKNOWN_SPREAD, VoxelKey};
+use crate::geometry::{SYM3_PAIRS, Sym3, UNKNOWN_SPREAD, VoxelKey, sym3_matrix};
 use crate::registration::kdtree::{KdTree, to_f32};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -298,12 +298,7 @@ fn plane_normal(spread: &Sym3, points: u32) -> Option<[f64; 3]> {
     if !(l1 > 0.0 && l0 <= 0.1 * l1) {
         return None;
     }
-    let mut a = nalgebra::Matrix3::zeros();
-    for (&c, (i, j)) in m.iter().zip(SYM3_PAIRS) {
-        a[(i, j)] = c;
-        a[(j, i)] = c;
-    }
-    let n = crate::registration::covariance::smallest_eigenvector(&a);
+    let n = crate::registration::covariance::smallest_eigenvector(&sym3_matrix(&m));
     Some([n.x, n.y, n.z])
 }
 

@@ -462,8 +462,8 @@ mod tests {
     use rand_chacha::ChaCha8Rng;
 
     fn reference(m: &[f64; 6]) -> [f64; 3] {
-        let a = Matrix3::new(m[0], m[1], m[2], m[1], m[3], m[4], m[2], m[4], m[5]);
-        let mut e: Vec<f64> = SymmetricEigen::new(a).eigenvalues.iter().copied().collect();
+        let mut e: Vec<f64> =
+            SymmetricEigen::new(crate::geometry::sym3_matrix(m)).eigenvalues.iter().copied().collect();
         e.sort_by(f64::total_cmp);
         [e[0], e[1], e[2]]
     }

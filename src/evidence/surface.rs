@@ -52,8 +52,8 @@
 
 use super::grid::{Box3, packed_key, unpack};
 use super::stats::EvidenceConfig;
-use crate::geometry::{SYM3_PAIRS, Sym3};
-use nalgebra::{Matrix3, SymmetricEigen, Vector3};
+use crate::geometry::{SYM3_PAIRS, Sym3, sym3_matrix};
+use nalgebra::{SymmetricEigen, Vector3};
 use rayon::prelude::*;
 use rustc_hash::FxHashMap;
 
@@ -182,9 +182,7 @@ impl VoxelShape {
         if points < 3 {
             return (ball, 0.0);
         }
-        let [xx, xy, xz, yy, yz, zz] = *cov;
-        let cov = Matrix3::new(xx, xy, xz, xy, yy, yz, xz, yz, zz);
-        let eig = SymmetricEigen::new(cov);
+        let eig = SymmetricEigen::new(sym3_matrix(cov));
         let mut order = [0usize, 1, 2];
         order.sort_by(|&a, &b| eig.eigenvalues[a].total_cmp(&eig.eigenvalues[b]));
         let axis = |i: usize| -> [f32; 3] {

@@ -30,6 +30,13 @@ pub type Sym3 = [f32; 6];
 /// The (row, column) of each entry of a [`Sym3`].
 pub const SYM3_PAIRS: [(usize, usize); 6] = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)];
 
+/// The full matrix of an upper triangle `[xx, xy, xz, yy, yz, zz]` (a
+/// [`Sym3`] in `f64`).
+pub fn sym3_matrix(m: &[f64; 6]) -> nalgebra::Matrix3<f64> {
+    let [xx, xy, xz, yy, yz, zz] = *m;
+    nalgebra::Matrix3::new(xx, xy, xz, xy, yy, yz, xz, yz, zz)
+}
+
 /// The spread of a voxel's points where it is not known (cleaned maps and
 /// lifelong maps written before seam kept it).
 pub const UNKNOWN_SPREAD: Sym3 = [f32::NAN; 6];
