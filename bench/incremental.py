@@ -258,7 +258,7 @@ def main():
 
     if args.json:
         doc = {
-            "seam": str(exe_copy), "sensor": args.sensor, "keyframes_per_session": keyframes, "sessions": args.sessions,
+            "seam": str(Path(args.seam)), "sensor": args.sensor, "keyframes_per_session": keyframes, "sessions": args.sessions,
             "seed": args.seed, "threads": args.threads, "cpus": os.cpu_count(), "load_before": load_before,
             "load_after": os.getloadavg(), "runtime_s": time.perf_counter() - t_start, "work_dir": str(work),
             "merge_steps": MERGE, "update_steps": UPDATE, "steps_seen": steps_seen, "rows": rows,
