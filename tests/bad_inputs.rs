@@ -288,6 +288,8 @@ fn bad_evidence_settings_and_dor_inputs() {
     std::fs::write(&nr_margin, "[evidence]\nno_return_margin_deg = 0.0\n").unwrap();
     let nr_elevation = t.path().join("nr_elevation.toml");
     std::fs::write(&nr_elevation, "[evidence]\nno_return_min_elevation_deg = 120.0\n").unwrap();
+    let vacated = t.path().join("vacated.toml");
+    std::fs::write(&vacated, "[evidence]\nvacated_clearance_m = -0.05\n").unwrap();
     for (cfg, fragment) in [
         (&model, "octomap"),
         (&clearance, "free_clearance_m"),
@@ -300,6 +302,7 @@ fn bad_evidence_settings_and_dor_inputs() {
         (&nr_range, "no_return_range_m"),
         (&nr_margin, "no_return_margin_deg"),
         (&nr_elevation, "no_return_min_elevation_deg"),
+        (&vacated, "vacated_clearance_m"),
     ] {
         let o = run(&["--config", cfg.to_str().unwrap(), "ingest", st, dir]);
         assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));

@@ -33,7 +33,8 @@
 
 use super::lifelong::{Category, ChangeEvent, LifelongMap, MapVoxel};
 use crate::evidence::grid::{pack, unpack};
-use crate::geometry::{SYM3_PAIRS, Sym3, UNKNOWN_SPREAD, VoxelKey, sym3_matrix};
+use crate::evidence::surface::plane_normal;
+use crate::geometry::{SYM3_PAIRS, Sym3, UNKNOWN_SPREAD, VoxelKey};
 use crate::registration::kdtree::{KdTree, to_f32};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -285,21 +286,6 @@ pub fn bayes(a: f64, b: f64) -> f64 {
 /// as it was and fully reliable evidence (ω = 1) removes the voxel at once.
 pub fn deleted_factor(reliability: f32) -> f64 {
     0.5 + 0.5 * (reliability as f64).clamp(0.0, 1.0)
-}
-
-/// The unit normal of a voxel's points when they lie on a plane: at least
-/// 3 points and a smallest spread eigenvalue under a tenth of the middle one.
-fn plane_normal(spread: &Sym3, points: u32) -> Option<[f64; 3]> {
-    if points < 3 || spread.iter().any(|c| !c.is_finite()) {
-        return None;
-    }
-    let m = spread.map(|c| c as f64);
-    let [l0, l1, _] = crate::evidence::sym3_eigenvalues(&m);
-    if !(l1 > 0.0 && l0 <= 0.1 * l1) {
-        return None;
-    }
-    let n = crate::registration::covariance::smallest_eigenvector(&sym3_matrix(&m));
-    Some([n.x, n.y, n.z])
 }
 
 /// Sorted packed keys with a lookup, for neighbourhood queries.

@@ -185,6 +185,19 @@ pub(super) struct Marks {
     words: Box<[AtomicU64]>,
 }
 
+/// Whether bit `i` of a row bitset is set (bits past its end are not).
+fn bit_set(bits: &[u64], i: usize) -> bool {
+    bits.get(i / 64).is_some_and(|w| w & (1 << (i % 64)) != 0)
+}
+
+/// One keyframe's marks: `all` (hits, and frees above `free_clearance_m`)
+/// and `band`, the frees only the lower clearance of vacated map voxels
+/// allows (`EvidenceConfig::free_vacated_low`).
+struct KeyframeMarks {
+    all: Marks,
+    band: Option<Marks>,
+}
+
 impl Marks {
     pub(super) fn new(b: Box3) -> Marks {
         let dims = b.dims();
@@ -376,6 +389,9 @@ pub struct InterestEvidence {
     /// clamping (the baseline; kept whatever the model, it costs 4 bytes).
     log_odds: Vec<f32>,
     bounds: Box3,
+    /// Rows freed without the own-hit guard and with the lower clearance
+    /// (bit per row; empty: none; [`Self::set_unguarded`]).
+    unguarded: Vec<u64>,
 }
 
 /// What one keyframe added.
@@ -445,7 +461,14 @@ impl InterestEvidence {
             bounds.add(unpack(k));
         }
         let n = keys.len();
-        InterestEvidence { voxel_m, keys, rows: vec![Row::default(); n], log_odds: vec![0.0; n], bounds }
+        InterestEvidence {
+            voxel_m,
+            keys,
+            rows: vec![Row::default(); n],
+            log_odds: vec![0.0; n],
+            bounds,
+            unguarded: Vec::new(),
+        }
     }
 
     pub fn len(&self) -> usize {
@@ -484,7 +507,24 @@ impl InterestEvidence {
         let (lo, hi) = self.x_range(b);
         let (keys, idx): (Vec<u64>, Vec<u32>) =
             (lo..hi).filter(|&i| b.contains(&unpack(self.keys[i]).0)).map(|i| (self.keys[i], i as u32)).unzip();
-        (Self::on_sorted(keys, self.voxel_m), idx)
+        let mut sub = Self::on_sorted(keys, self.voxel_m);
+        if !self.unguarded.is_empty() {
+            sub.set_unguarded(idx.iter().map(|&i| bit_set(&self.unguarded, i as usize)));
+        }
+        (sub, idx)
+    }
+
+    /// Marks, row by row, the voxels a keyframe frees next to its own hits
+    /// and down to `EvidenceConfig::vacated_clearance_m` (see
+    /// `EvidenceConfig::free_vacated_low`).
+    pub fn set_unguarded(&mut self, flags: impl IntoIterator<Item = bool>) {
+        let mut bits = vec![0u64; self.len().div_ceil(64)];
+        for (i, f) in flags.into_iter().enumerate().take(self.len()) {
+            if f {
+                bits[i / 64] |= 1 << (i % 64);
+            }
+        }
+        self.unguarded = bits;
     }
 
     /// Indices of the keys whose x lies in the box's x range.
@@ -540,6 +580,10 @@ impl InterestEvidence {
             points_m.iter().filter(|p| voxel_key(p, v).is_some()).count()
         } else {
             let marks = Marks::new(b);
+            // Voxels freed only under the lower clearance of the unguarded
+            // (vacated map) voxels.
+            let band =
+                (!self.unguarded.is_empty() && cfg.vacated_clearance_m < cfg.free_clearance_m).then(|| Marks::new(b));
             let bits = shapes.map(|s| (s, s.bits_in(&b)));
             let cast: usize = points_m
                 .par_iter()
@@ -547,11 +591,15 @@ impl InterestEvidence {
                 .map(|p| {
                     // Free voxels of a downward ray stop `free_clearance_m`
                     // above its endpoint (centre z ≥ z_min ⇔ key z ≥ kz_min).
-                    let kz_min = if p[2] < origin_m[2] - CLEARANCE_MIN_DROP_M && cfg.free_clearance_m > 0.0 {
-                        ((p[2] + cfg.free_clearance_m) / v - 0.5).ceil().clamp(i32::MIN as f64, i32::MAX as f64) as i32
-                    } else {
-                        i32::MIN
+                    let kz_above = |clearance_m: f64| {
+                        if p[2] < origin_m[2] - CLEARANCE_MIN_DROP_M && clearance_m > 0.0 {
+                            ((p[2] + clearance_m) / v - 0.5).ceil().clamp(i32::MIN as f64, i32::MAX as f64) as i32
+                        } else {
+                            i32::MIN
+                        }
                     };
+                    let kz_min = kz_above(cfg.free_clearance_m);
+                    let kz_band = kz_above(cfg.vacated_clearance_m);
                     let hit = cast_ray(origin_m, p, v, |k| {
                         // A voxel with a shape frees only where the ray
                         // crosses it (evidence::surface).
@@ -565,6 +613,11 @@ impl InterestEvidence {
                         };
                         if free {
                             marks.mark(k, FREE)
+                        } else if shape.is_none()
+                            && k.0[2] >= kz_band
+                            && let Some(band) = &band
+                        {
+                            band.mark(k, FREE)
                         }
                     });
                     if let Some(k) = hit {
@@ -573,6 +626,7 @@ impl InterestEvidence {
                     hit.is_some() as usize
                 })
                 .sum();
+            let marks = KeyframeMarks { all: marks, band };
             let (h, f) = self.apply(&marks, origin_m, keyframe, cfg, shapes, &sky_bits);
             out.hit_voxels = h;
             out.free_voxels = f;
@@ -631,18 +685,21 @@ impl InterestEvidence {
     /// is freed next to the keyframe's own hits too.
     fn apply(
         &mut self,
-        marks: &Marks,
+        marks: &KeyframeMarks,
         origin_m: &[f64; 3],
         keyframe: u32,
         cfg: &EvidenceConfig,
         shapes: Option<&SurfaceShapes>,
         skip: &[u64],
     ) -> (usize, usize) {
+        let KeyframeMarks { all: marks, band } = marks;
         let (lo, hi) = self.x_range(&marks.b);
         let v = self.voxel_m;
         let (l_hit, l_miss, l_min, l_max) = cfg.log_odds.log_odds();
         let guard = cfg.free_guard_voxels as i32;
         let keys = &self.keys[lo..hi];
+        let unguarded = &self.unguarded;
+        let self_unguarded = |i: usize| bit_set(unguarded, i);
         let hit_free = AtomicU64::new(0);
         self.rows[lo..hi]
             .par_iter_mut()
@@ -652,7 +709,7 @@ impl InterestEvidence {
             .with_min_len(4096)
             .for_each(|(j, ((row, lo_odds), &pk))| {
                 let i = lo + j;
-                if skip.get(i / 64).is_some_and(|w| w & (1 << (i % 64)) != 0) {
+                if bit_set(skip, i) {
                     return;
                 }
                 let k = unpack(pk).0;
@@ -660,11 +717,19 @@ impl InterestEvidence {
                     return;
                 }
                 let mut kinds = marks.get(&k);
+                if let Some(band) = band
+                    && self_unguarded(i)
+                {
+                    kinds |= band.get(&k) & FREE;
+                }
                 if kinds == 0 {
                     return;
                 }
-                let guarded =
-                    || marks.hit_near(&k, guard) && !shapes.and_then(|s| s.get(pk)).is_some_and(|s| s.from_map);
+                let guarded = || {
+                    marks.hit_near(&k, guard)
+                        && !self_unguarded(i)
+                        && !shapes.and_then(|s| s.get(pk)).is_some_and(|s| s.from_map)
+                };
                 if kinds & FREE != 0 && (kinds & HIT != 0 || guarded()) {
                     kinds &= !FREE;
                     if kinds == 0 {

@@ -34,6 +34,7 @@ use crate::sensor::Fov;
 use nalgebra::Point3;
 use rayon::prelude::*;
 use rustc_hash::FxHashMap;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;
 
 /// One keyframe going into [`generate`].
@@ -130,6 +131,27 @@ pub fn generate(
         keys.extend_from_slice(k);
     }
     let mut session = InterestEvidence::new(keys, v);
+    if cfg.free_vacated_low && !map.is_empty() {
+        // Map voxels no point of this session occupies and that cannot be
+        // ground: freed next to own hits and below the clearance.
+        let occupied: Vec<AtomicU64> = (0..session.len().div_ceil(64)).map(|_| AtomicU64::new(0)).collect();
+        per_kf.par_iter().flat_map_iter(|(k, _)| k.iter()).for_each(|&k| {
+            if let Some(i) = session.find(k) {
+                occupied[i / 64].fetch_or(1 << (i % 64), Ordering::Relaxed);
+            }
+        });
+        let vacated: Vec<usize> = map
+            .par_iter()
+            .filter(|p| !p.maybe_ground())
+            .filter_map(|p| session.find(p.key))
+            .filter(|&i| occupied[i / 64].load(Ordering::Relaxed) & (1 << (i % 64)) == 0)
+            .collect();
+        let mut flags = vec![false; session.len()];
+        for i in vacated {
+            flags[i] = true;
+        }
+        session.set_unguarded(flags);
+    }
     // Map voxels with none of this session's points within about
     // `no_return_clear_m`: the only ones beams that returned nothing may
     // free, each up to the range it was seen from (× the reach factor).
@@ -810,6 +832,51 @@ mod tests {
         assert_eq!(row_in(&generate(&tip_inputs, &map, Some(&band), &narrow, |_| {}), jib).no_return_n, 0);
         let anywhere = EvidenceConfig { no_return_clear_m: 0.0, ..narrow };
         assert_eq!(row_in(&generate(&tip_inputs, &map, Some(&band), &anywhere, |_| {}), jib).no_return_n, 6);
+    }
+
+    /// The layer of a removed object just above the ground this session
+    /// hits: rays crossing it end on that ground a little behind, so the
+    /// clearance and the own-hit guard drop them, unless the voxel is a
+    /// vacated one that cannot be ground (`free_vacated_low`).
+    #[test]
+    fn vacated_layer_above_the_ground_is_freed_unless_it_may_be_ground() {
+        // Ground at z = 0.15 (the sensor 1.8 m above it): the ground's
+        // voxels are the layer [0, 0.2), the object's lowest one [0.2, 0.4),
+        // its centre 0.15 m above the ground, under the 0.2 m clearance.
+        let poses: Vec<Pose> = (0..6)
+            .map(|i| Pose::from_parts(Translation3::new(i as f64 * 2.0 - 5.0, 0.0, 1.95), UnitQuaternion::identity()))
+            .collect();
+        let scans: Vec<Vec<[f32; 3]>> = (0..6).map(|_| road_and_wall_scan([0.0, 0.0, 1.8])).collect();
+        let inputs: Vec<KeyframeInput<'_>> = scans
+            .iter()
+            .zip(&poses)
+            .enumerate()
+            .map(|(i, (pts, t))| KeyframeInput { index: i as u32, submap: 0, t_world_keyframe: *t, points: pts })
+            .collect();
+        let v = 0.2;
+        let at = [0.1, -6.1, 0.3];
+        // A container's side (a plane across y), and a piece of ground.
+        let side = MapPatch {
+            key: packed_key(&at, v).unwrap(),
+            xyz_m: at,
+            points: 12,
+            spread_m2: [3e-3, 0.0, 0.0, 1e-6, 0.0, 3e-3],
+            seen_from_m: 10.0,
+        };
+        let ground = MapPatch { spread_m2: [3e-3, 0.0, 0.0, 3e-3, 0.0, 1e-6], ..side };
+        assert!(!side.maybe_ground() && ground.maybe_ground());
+        let freed = |patch: &MapPatch, cfg: &EvidenceConfig| {
+            let out = generate(&inputs, std::slice::from_ref(patch), None, cfg, |_| {});
+            let t = &out.submaps[0];
+            t.keys.iter().position(|k| *k == unpack(patch.key)).map_or(0, |i| row_of(t, i).free_n)
+        };
+        let cfg = EvidenceConfig::default();
+        assert!(freed(&side, &cfg) >= 3, "rays to the ground behind cross where the side was");
+        assert_eq!(freed(&ground, &cfg), 0, "ground keeps the clearance and the guard");
+        let off = EvidenceConfig { free_vacated_low: false, ..cfg.clone() };
+        assert_eq!(freed(&side, &off), 0, "without the rule the clearance drops every ray");
+        let high = EvidenceConfig { vacated_clearance_m: 0.2, ..cfg.clone() };
+        assert_eq!(freed(&side, &high), 0, "the rule's own clearance applies");
     }
 
     /// Reprojection by ΔT of the poses that generated the evidence is the

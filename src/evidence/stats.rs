@@ -65,6 +65,41 @@ pub struct EvidenceConfig {
     /// first rule. (DUFOMap's hit extension and "no ray pass-through hits"
     /// play the same role.)
     pub free_guard_voxels: u32,
+    /// Earlier sessions' map voxels that this session's points do not
+    /// occupy, and whose own points cannot have been ground (at least three,
+    /// and not a plane within about 37° of level: `MapPatch::maybe_ground`),
+    /// are freed next to a keyframe's own hits (no `free_guard_voxels`) and
+    /// down to `vacated_clearance_m` above a downward ray's endpoint (instead
+    /// of `free_clearance_m`). No point of the session lies in them, so only
+    /// change detection sees this; DOR's labels cannot change.
+    ///
+    /// Why: a removed container's or pallet's lowest layer, 0.2-0.4 m above
+    /// the ground the next session hits, was never freed. Every ray crossing
+    /// it ends on that ground just behind, so the clearance dropped it, and
+    /// the guard dropped it next to the keyframe's own ground hits. Both are
+    /// there so that grazing rays do not free the ground; ground-like voxels
+    /// keep them: a vacated voxel whose points were a level plane, or too
+    /// few to tell, is treated as ground.
+    ///
+    /// Measured with `seam eval changes` on the 5 × 150-keyframe sites of
+    /// `DeletedReliability`'s table (seed 3; OS1-64 the demo site, seed 1),
+    /// permanent structure kept static / removed objects' voxels left static,
+    /// off → on: OS1-64 99.27 / 18.78 → 99.25 / 17.72 %, HDL-64E 99.33 /
+    /// 9.44 → 99.27 / 8.12 %, HDL-32E 99.42 / 14.63 → 99.40 / 13.01 %,
+    /// VLP-16 99.32 / 19.24 → 99.31 / 17.93 %, Avia 98.31 / 47.04 → 98.26 /
+    /// 45.72 %. Object changes with events in the right session rose on
+    /// HDL-32E (96.88 → 98.44 %) and VLP-16 (95.24 → 96.83 %). Variants
+    /// tried on the HDL-64E site's last session (permanent voxels lost /
+    /// removed-object voxels gained, against 265 / 179 for this rule):
+    /// every vacated voxel, ground test none, 3,245 / 225 (most of the loss
+    /// ground); only level planes kept as ground, not voxels of fewer than
+    /// three points, 986 / 220; without the guard but with the usual
+    /// clearance, 12 gained; a clearance of 0 instead of 0.05 m, 338 / 193. The
+    /// evidence step takes about 1 s longer on a 150-keyframe HDL-64E
+    /// session (24 s).
+    pub free_vacated_low: bool,
+    /// The clearance of `free_vacated_low`, m.
+    pub vacated_clearance_m: f64,
     /// DOR removes a voxel only if none of its 26 neighbours is a static
     /// occupied voxel (hit, ε_l ≤ τ_dyn). A surface grazed by rays is freed
     /// in patches, but its patches touch parts that were not; a mover stands
@@ -227,6 +262,8 @@ impl Default for EvidenceConfig {
             eps_max: 1.0,
             pseudo_count: 0.0,
             free_guard_voxels: 1,
+            free_vacated_low: true,
+            vacated_clearance_m: 0.05,
             static_neighbour_veto: false,
             free_clearance_m: 0.2,
             free_test: FreeTest::Surface,
@@ -262,6 +299,7 @@ impl EvidenceConfig {
             ("r0_m", self.r0_m),
             ("pseudo_count", self.pseudo_count),
             ("free_clearance_m", self.free_clearance_m),
+            ("vacated_clearance_m", self.vacated_clearance_m),
             ("surface_sigmas", self.surface_sigmas),
             ("surface_tolerance_m", self.surface_tolerance_m),
             ("surface_behind_m", self.surface_behind_m),

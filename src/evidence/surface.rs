@@ -150,6 +150,36 @@ pub struct MapPatch {
     pub seen_from_m: f64,
 }
 
+/// The unit normal of a voxel's points when they lie on a plane: at least
+/// 3 points and a smallest spread eigenvalue under a tenth of the middle one.
+pub fn plane_normal(spread: &Sym3, points: u32) -> Option<[f64; 3]> {
+    if points < 3 || spread.iter().any(|c| !c.is_finite()) {
+        return None;
+    }
+    let m = spread.map(|c| c as f64);
+    let [l0, l1, _] = super::sym3_eigenvalues(&m);
+    if !(l1 > 0.0 && l0 <= 0.1 * l1) {
+        return None;
+    }
+    let n = crate::registration::covariance::smallest_eigenvector(&sym3_matrix(&m));
+    Some([n.x, n.y, n.z])
+}
+
+/// `|n_z|` from which a plane counts as ground (within about 37° of level).
+const GROUND_NORMAL_MIN_Z: f64 = 0.8;
+
+impl MapPatch {
+    /// Whether this voxel's points may be ground, or too few to tell: fewer
+    /// than three, no spread stored, or a plane within about 37° of level.
+    /// What `EvidenceConfig::vacated_clearance_m` leaves alone.
+    pub fn maybe_ground(&self) -> bool {
+        if self.points < 3 || self.spread_m2.iter().any(|c| !c.is_finite()) {
+            return true;
+        }
+        plane_normal(&self.spread_m2, self.points).is_some_and(|n| n[2].abs() >= GROUND_NORMAL_MIN_Z)
+    }
+}
+
 fn dot(a: &[f64; 3], b: &[f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
