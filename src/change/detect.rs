@@ -80,6 +80,14 @@ pub struct ChangeConfig {
     /// HDL-32E 99.45 / 16.58 → 99.42 / 14.63 %, VLP-16 99.33 / 21.13 →
     /// 99.32 / 19.24 %, Avia 98.32 / 47.41 → 98.31 / 47.04 %. 0.10 m gives
     /// the same on the demo (99.27 / 18.75 %).
+    ///
+    /// Tried and not taken: a voxel the session before saw empty
+    /// (deleted-overlap) coming back only when the new session hits that
+    /// voxel itself, not a neighbour. With `evidence.free_vacated_low`, on
+    /// the same sites: HDL-64E 99.27 / 8.12 → 99.06 / 6.77 %, OS1-64 99.25 /
+    /// 17.72 → 98.98 / 14.68 %, VLP-16 99.31 / 17.93 → 99.01 / 15.77 %: two
+    /// to seven permanent voxels lost (ground, building, trees) for each
+    /// removed one, and the Avia site (98.26 %) has no room for 0.3 points.
     pub off_surface_m: f64,
 }
 
