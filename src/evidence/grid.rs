@@ -186,7 +186,7 @@ pub(super) struct Marks {
 }
 
 /// Whether bit `i` of a row bitset is set (bits past its end are not).
-fn bit_set(bits: &[u64], i: usize) -> bool {
+pub(super) fn bit_set(bits: &[u64], i: usize) -> bool {
     bits.get(i / 64).is_some_and(|w| w & (1 << (i % 64)) != 0)
 }
 

@@ -23,7 +23,7 @@
 //! can be turned by any yaw). The submap-frame coordinates of a row are
 //! `A_gen⁻¹ · x`, with `A_gen` from the stored graph version.
 
-use super::grid::{Box3, InterestEvidence, RayStats, Row, pack, packed_key, row_of, unpack};
+use super::grid::{Box3, InterestEvidence, RayStats, Row, bit_set, pack, packed_key, row_of, unpack};
 use super::no_return::{NoReturn, NoReturnImage};
 use super::raycast::voxel_key;
 use super::stats::{EvidenceConfig, FreeTest};
@@ -131,20 +131,19 @@ pub fn generate(
         keys.extend_from_slice(k);
     }
     let mut session = InterestEvidence::new(keys, v);
+    // Rows some point of this session occupies: what vacated map voxels and
+    // (with no clearance cells) no-return candidates must not be.
+    let needs_own =
+        !map.is_empty() && (cfg.free_vacated_low || (no_return_fov.is_some() && cfg.no_return_clear_m <= 0.0));
+    let own_rows = if needs_own { occupied_rows(&session, &per_kf) } else { Vec::new() };
     if cfg.free_vacated_low && !map.is_empty() {
         // Map voxels no point of this session occupies and that cannot be
         // ground: freed next to own hits and below the clearance.
-        let occupied: Vec<AtomicU64> = (0..session.len().div_ceil(64)).map(|_| AtomicU64::new(0)).collect();
-        per_kf.par_iter().flat_map_iter(|(k, _)| k.iter()).for_each(|&k| {
-            if let Some(i) = session.find(k) {
-                occupied[i / 64].fetch_or(1 << (i % 64), Ordering::Relaxed);
-            }
-        });
         let vacated: Vec<usize> = map
             .par_iter()
             .filter(|p| !p.maybe_ground())
             .filter_map(|p| session.find(p.key))
-            .filter(|&i| occupied[i / 64].load(Ordering::Relaxed) & (1 << (i % 64)) == 0)
+            .filter(|&i| !bit_set(&own_rows, i))
             .collect();
         let mut flags = vec![false; session.len()];
         for i in vacated {
@@ -169,12 +168,12 @@ pub fn generate(
         };
         let mut in_map: Vec<(u64, f64)> = map.iter().map(|p| (p.key, p.seen_from_m)).collect();
         in_map.par_sort_unstable_by_key(|p| p.0);
-        let occupied_keys = |k: &u64| per_kf.iter().any(|(keys, _)| keys.binary_search(k).is_ok());
         session
             .keys()
             .par_iter()
-            .map(|k| match in_map.binary_search_by_key(k, |p| p.0) {
-                Ok(i) if clear(*k) && (reach > 0 || !occupied_keys(k)) => {
+            .enumerate()
+            .map(|(row, k)| match in_map.binary_search_by_key(k, |p| p.0) {
+                Ok(i) if clear(*k) && (reach > 0 || !bit_set(&own_rows, row)) => {
                     (in_map[i].1 * cfg.no_return_reach_factor).min(cfg.no_return_range_m) as f32
                 }
                 _ => 0.0,
@@ -251,6 +250,18 @@ pub fn generate(
     stats.cleaned_voxels = cleaned.iter().map(CleanedMap::len).sum();
     stats.total_s = started.elapsed().as_secs_f64();
     SessionEvidence { submaps, cleaned, labels, stats }
+}
+
+/// One bit per row of `session`: set where some keyframe's point keys
+/// (`per_kf`, each keyframe's a subset of the session's keys) hold it.
+fn occupied_rows(session: &InterestEvidence, per_kf: &[(Vec<u64>, Box3)]) -> Vec<u64> {
+    let bits: Vec<AtomicU64> = (0..session.len().div_ceil(64)).map(|_| AtomicU64::new(0)).collect();
+    per_kf.par_iter().flat_map_iter(|(k, _)| k.iter()).for_each(|&k| {
+        if let Some(i) = session.find(k) {
+            bits[i / 64].fetch_or(1 << (i % 64), Ordering::Relaxed);
+        }
+    });
+    bits.into_iter().map(AtomicU64::into_inner).collect()
 }
 
 /// An empty box for [`grow_hit_boxes`]: every `lo` above every `hi`.

@@ -171,7 +171,7 @@ const GROUND_NORMAL_MIN_Z: f64 = 0.8;
 impl MapPatch {
     /// Whether this voxel's points may be ground, or too few to tell: fewer
     /// than three, no spread stored, or a plane within about 37° of level.
-    /// What `EvidenceConfig::vacated_clearance_m` leaves alone.
+    /// What `EvidenceConfig::free_vacated_low` leaves alone.
     pub fn maybe_ground(&self) -> bool {
         if self.points < 3 || self.spread_m2.iter().any(|c| !c.is_finite()) {
             return true;
