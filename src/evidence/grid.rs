@@ -12,9 +12,12 @@
 //! 1. cast every ray and set 2 bits (hit, free) per voxel in a dense bitmap
 //!    over the keyframe's ray box clipped to the interest set's box; bits of
 //!    threads meet through atomic `or`s, which commute, so the order rays are
-//!    cast in does not matter (rays run in parallel);
+//!    cast in does not matter (rays run in parallel); a ray that ends at the
+//!    ground frees nothing within the clearance above its end;
 //! 2. walk the interest voxels inside the box (in parallel: each row is
-//!    written by one thread) and add eq. 4's `q`, `q u uᵀ` once per kind;
+//!    written by one thread), drop the frees next to the keyframe's own hits
+//!    (the guard; hits at the ground level beneath do not guard), and add
+//!    eq. 4's `q`, `q u uᵀ` once per kind;
 //! 3. with a no-return image (`evidence::no_return`), free the candidate
 //!    map voxels whose direction returned nothing, once, whatever else
 //!    freed them (pass 2 leaves those rows alone).
@@ -22,6 +25,7 @@
 //! The bitmap's pages are zeroed lazily by the OS (`Box::new_zeroed_slice`),
 //! so a keyframe only pays for the pages its rays touch.
 
+use super::ground::GroundLevel;
 use super::no_return::NoReturn;
 use super::raycast::{cast_ray, voxel_key};
 use super::stats::{DirectionalStats, EvidenceConfig, EvidenceModel, VoxelEvidence};
@@ -29,11 +33,13 @@ use super::surface::SurfaceShapes;
 use super::tables::{StatsColumns, SubmapEvidence};
 use crate::geometry::VoxelKey;
 use rayon::prelude::*;
+use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 /// The free clearance (`EvidenceConfig::free_clearance_m`) applies to rays
-/// that end at least this far below the sensor: the ground and low objects,
-/// not walls seen level, whose rays would otherwise lose every free voxel.
+/// that end at least this far below the sensor (and, by default, at the
+/// ground level, `evidence::ground`): not walls seen level, whose rays
+/// would otherwise lose every free voxel.
 const CLEARANCE_MIN_DROP_M: f64 = 0.5;
 
 pub(super) const HIT: u64 = 1;
@@ -226,8 +232,9 @@ impl Marks {
     }
 
     /// Whether a voxel within `r` (Chebyshev) of `k`, other than `k`, is
-    /// marked hit. Voxels outside the box count as unmarked.
-    fn hit_near(&self, k: &[i32; 3], r: i32) -> bool {
+    /// marked hit. Voxels outside the box count as unmarked. With `ground`,
+    /// hits below `k` at their column's ground level do not count.
+    fn hit_near(&self, k: &[i32; 3], r: i32, ground: Option<&GroundLevel>) -> bool {
         if r <= 0 {
             return false;
         }
@@ -235,7 +242,11 @@ impl Marks {
             for dy in -r..=r {
                 for dx in -r..=r {
                     let n = [k[0] + dx, k[1] + dy, k[2] + dz];
-                    if (dx, dy, dz) != (0, 0, 0) && self.b.contains(&n) && self.get(&n) & HIT != 0 {
+                    if (dx, dy, dz) != (0, 0, 0)
+                        && self.b.contains(&n)
+                        && self.get(&n) & HIT != 0
+                        && !(dz < 0 && ground.is_some_and(|g| g.at_ground(&n) == Some(true)))
+                    {
                         return true;
                     }
                 }
@@ -392,6 +403,8 @@ pub struct InterestEvidence {
     /// Rows freed without the own-hit guard and with the lower clearance
     /// (bit per row; empty: none; [`Self::set_unguarded`]).
     unguarded: Vec<u64>,
+    /// The ground level of the session's columns ([`Self::set_ground`]).
+    ground: Option<Arc<GroundLevel>>,
 }
 
 /// What one keyframe added.
@@ -468,6 +481,7 @@ impl InterestEvidence {
             log_odds: vec![0.0; n],
             bounds,
             unguarded: Vec::new(),
+            ground: None,
         }
     }
 
@@ -508,6 +522,7 @@ impl InterestEvidence {
         let (keys, idx): (Vec<u64>, Vec<u32>) =
             (lo..hi).filter(|&i| b.contains(&unpack(self.keys[i]).0)).map(|i| (self.keys[i], i as u32)).unzip();
         let mut sub = Self::on_sorted(keys, self.voxel_m);
+        sub.ground = self.ground.clone();
         if !self.unguarded.is_empty() {
             sub.set_unguarded(idx.iter().map(|&i| bit_set(&self.unguarded, i as usize)));
         }
@@ -525,6 +540,16 @@ impl InterestEvidence {
             }
         }
         self.unguarded = bits;
+    }
+
+    /// The ground level of the columns the session's points occupy: rays
+    /// get the free clearance only where they end at it
+    /// (`EvidenceConfig::clearance_near_ground_only`), and hits at it below a
+    /// voxel do not guard that voxel (`EvidenceConfig::ground_hits_guard`).
+    /// Without it (or with both rules off) every downward ray gets the
+    /// clearance and every hit guards.
+    pub fn set_ground(&mut self, ground: GroundLevel) {
+        self.ground = Some(Arc::new(ground));
     }
 
     /// Indices of the keys whose x lies in the box's x range.
@@ -585,14 +610,18 @@ impl InterestEvidence {
             let band =
                 (!self.unguarded.is_empty() && cfg.vacated_clearance_m < cfg.free_clearance_m).then(|| Marks::new(b));
             let bits = shapes.map(|s| (s, s.bits_in(&b)));
+            let ground = self.ground.as_deref().filter(|_| cfg.clearance_near_ground_only);
             let cast: usize = points_m
                 .par_iter()
                 .with_min_len(2048)
                 .map(|p| {
-                    // Free voxels of a downward ray stop `free_clearance_m`
-                    // above its endpoint (centre z ≥ z_min ⇔ key z ≥ kz_min).
+                    // Free voxels of a downward ray that ends at the ground
+                    // stop `free_clearance_m` above its endpoint (centre z ≥
+                    // z_min ⇔ key z ≥ kz_min).
+                    let ground_ray =
+                        ground.is_none_or(|g| voxel_key(p, v).is_none_or(|k| g.at_ground(&k.0).unwrap_or(true)));
                     let kz_above = |clearance_m: f64| {
-                        if p[2] < origin_m[2] - CLEARANCE_MIN_DROP_M && clearance_m > 0.0 {
+                        if ground_ray && p[2] < origin_m[2] - CLEARANCE_MIN_DROP_M && clearance_m > 0.0 {
                             ((p[2] + clearance_m) / v - 0.5).ceil().clamp(i32::MIN as f64, i32::MAX as f64) as i32
                         } else {
                             i32::MIN
@@ -697,6 +726,7 @@ impl InterestEvidence {
         let v = self.voxel_m;
         let (l_hit, l_miss, l_min, l_max) = cfg.log_odds.log_odds();
         let guard = cfg.free_guard_voxels as i32;
+        let ground = self.ground.as_deref().filter(|_| !cfg.ground_hits_guard);
         let keys = &self.keys[lo..hi];
         let unguarded = &self.unguarded;
         let self_unguarded = |i: usize| bit_set(unguarded, i);
@@ -726,7 +756,7 @@ impl InterestEvidence {
                     return;
                 }
                 let guarded = || {
-                    marks.hit_near(&k, guard)
+                    marks.hit_near(&k, guard, ground)
                         && !self_unguarded(i)
                         && !shapes.and_then(|s| s.get(pk)).is_some_and(|s| s.from_map)
                 };

@@ -32,12 +32,15 @@
 //! - `stats.rs`: [`EvidenceConfig`], [`DirectionalStats`], [`VoxelEvidence`],
 //!   closed-form 3×3 eigenvalues [`sym3_eigenvalues`]
 //! - `surface.rs`: the sub-voxel free test ([`surface::SurfaceShapes`])
+//! - `ground.rs`: each voxel column's ground level, for the clearance and
+//!   the guard ([`ground::GroundLevel`])
 //! - `no_return.rs`: free evidence from beams that returned nothing ([`no_return::NoReturnImage`])
 //! - `accumulate.rs`: [`accumulate_keyframe`] and its parallel twin
 //!   [`accumulate_keyframe_par`] into an [`EvidenceMap`]
 
 mod accumulate;
 pub mod grid;
+pub mod ground;
 pub mod no_return;
 mod raycast;
 pub mod session;

@@ -24,6 +24,7 @@
 //! `A_gen⁻¹ · x`, with `A_gen` from the stored graph version.
 
 use super::grid::{Box3, InterestEvidence, RayStats, Row, bit_set, pack, packed_key, row_of, unpack};
+use super::ground::GroundLevel;
 use super::no_return::{NoReturn, NoReturnImage};
 use super::raycast::voxel_key;
 use super::stats::{EvidenceConfig, FreeTest};
@@ -131,6 +132,9 @@ pub fn generate(
         keys.extend_from_slice(k);
     }
     let mut session = InterestEvidence::new(keys, v);
+    if cfg.clearance_near_ground_only || !cfg.ground_hits_guard {
+        session.set_ground(GroundLevel::from_keys(per_kf.iter().flat_map(|(k, _)| k)));
+    }
     // Rows some point of this session occupies: what vacated map voxels and
     // (with no clearance cells) no-return candidates must not be.
     let needs_own =
@@ -843,6 +847,105 @@ mod tests {
         assert_eq!(row_in(&generate(&tip_inputs, &map, Some(&band), &narrow, |_| {}), jib).no_return_n, 0);
         let anywhere = EvidenceConfig { no_return_clear_m: 0.0, ..narrow };
         assert_eq!(row_in(&generate(&tip_inputs, &map, Some(&band), &anywhere, |_| {}), jib).no_return_n, 6);
+    }
+
+    /// A 64-beam spinning sensor (±22.5°, 720 columns) at `origin` over flat
+    /// ground (z = 0) with axis-aligned boxes `[lo, hi]`: the first return of
+    /// each beam within 60 m, in the sensor frame (no rotation).
+    fn boxes_scan(origin: [f64; 3], boxes: &[([f64; 3], [f64; 3])]) -> Vec<[f32; 3]> {
+        let mut out = Vec::new();
+        for b in 0..64 {
+            let el = (-22.5 + 45.0 * b as f64 / 63.0f64).to_radians();
+            for c in 0..720 {
+                let az = std::f64::consts::TAU * c as f64 / 720.0;
+                let d = [el.cos() * az.cos(), el.cos() * az.sin(), el.sin()];
+                let mut t = if d[2] < 0.0 { -origin[2] / d[2] } else { f64::INFINITY };
+                for (lo, hi) in boxes {
+                    // Slab test.
+                    let (mut t0, mut t1) = (0.0f64, f64::INFINITY);
+                    for a in 0..3 {
+                        let (p, q) = ((lo[a] - origin[a]) / d[a], (hi[a] - origin[a]) / d[a]);
+                        t0 = t0.max(p.min(q));
+                        t1 = t1.min(p.max(q));
+                    }
+                    if t0 <= t1 {
+                        t = t.min(t0);
+                    }
+                }
+                if t <= 60.0 {
+                    out.push(d.map(|x| (x * t) as f32));
+                }
+            }
+        }
+        out
+    }
+
+    /// A car driving ahead along the sensor's beams, a little faster than
+    /// the sensor: the middle of its back is crossed only by rays that end
+    /// on its back again, a little lower, and its lowest layer mostly by
+    /// rays to the ground beside it. The ground-aware clearance and guard
+    /// free both; with the rules off both are kept.
+    #[test]
+    fn a_car_driving_ahead_is_removed_down_to_its_lowest_layer() {
+        // Sensor at 1.8 m moving 1 m per keyframe along x; the car (4 × 1.8 ×
+        // 1.5 m, its floor 0.25 m up, wheels left out) 1.3 m per keyframe,
+        // its back 16 m ahead at first; a wall 40 m ahead closes the view. A
+        // ray to where the car's back was, 1 m up, ends on its back again
+        // 0.07 m (next keyframe) and 0.15 m (the one after) lower: under the
+        // 0.2 m clearance.
+        let n = 3;
+        let poses: Vec<Pose> = (0..n)
+            .map(|i| Pose::from_parts(Translation3::new(i as f64, 0.0, 1.8), UnitQuaternion::identity()))
+            .collect();
+        let car_at = |i: usize| {
+            let x = 16.0 + 1.3 * i as f64;
+            ([x, -0.9, 0.25], [x + 4.0, 0.9, 1.5])
+        };
+        let wall = ([40.0, -30.0, 0.0], [41.0, 30.0, 6.0]);
+        let scans: Vec<Vec<[f32; 3]>> =
+            (0..n).map(|i| boxes_scan(poses[i].translation.vector.into(), &[car_at(i), wall])).collect();
+        let inputs: Vec<KeyframeInput<'_>> = scans
+            .iter()
+            .zip(&poses)
+            .enumerate()
+            .map(|(i, (pts, t))| KeyframeInput { index: i as u32, submap: 0, t_world_keyframe: *t, points: pts })
+            .collect();
+        // The first keyframe's points on the car's back: its lowest voxel
+        // layer (below 0.4 m, next to the ground) and its middle (0.7-1.2 m).
+        let back_x = car_at(0).0[0];
+        let removed = |cfg: &EvidenceConfig| {
+            let out = generate(&inputs, &[], None, cfg, |_| {});
+            let (mut low, mut middle) = ((0, 0), (0, 0));
+            for (j, p) in scans[0].iter().enumerate() {
+                let (x, z) = (p[0] as f64, p[2] as f64 + 1.8);
+                if (x - back_x).abs() > 1e-3 {
+                    continue;
+                }
+                let c = match z {
+                    z if z < 0.4 => &mut low,
+                    z if (0.7..1.2).contains(&z) => &mut middle,
+                    _ => continue,
+                };
+                c.0 += out.labels.dynamic[j] as usize;
+                c.1 += 1;
+            }
+            assert!(low.1 >= 5 && middle.1 >= 10, "the car's back has points: {low:?} {middle:?}");
+            (low.0 as f64 / low.1 as f64, middle.0 as f64 / middle.1 as f64)
+        };
+        let cfg = EvidenceConfig::default();
+        let (low, middle) = removed(&cfg);
+        assert!(low > 0.8 && middle > 0.8, "defaults: lowest layer {low:.2}, middle {middle:.2} removed");
+        let clearance = EvidenceConfig { clearance_near_ground_only: false, ..cfg.clone() };
+        let (_, middle_old) = removed(&clearance);
+        assert!(middle_old < 0.2, "the clearance on every downward ray keeps the middle: {middle_old:.2}");
+        let guard = EvidenceConfig { ground_hits_guard: true, ..cfg.clone() };
+        let (low_old, _) = removed(&guard);
+        assert!(low_old < 0.2, "ground hits guarding keep the lowest layer: {low_old:.2}");
+        // No ground point is removed.
+        let out = generate(&inputs, &[], None, &cfg, |_| {});
+        let ground = scans.iter().flatten().zip(&out.labels.dynamic).filter(|(p, _)| (p[2] as f64 + 1.8).abs() < 1e-3);
+        let (total, gone) = ground.fold((0, 0), |(t, g), (_, &d)| (t + 1, g + d as usize));
+        assert!(total > 10_000 && gone == 0, "{gone} of {total} ground points removed");
     }
 
     /// The layer of a removed object just above the ground this session

@@ -63,7 +63,8 @@ pub struct EvidenceConfig {
     /// voxels (Chebyshev) of a voxel it hit: a ray grazing a surface the same
     /// scan sees is not evidence that the surface is gone. 0 keeps only the
     /// first rule. (DUFOMap's hit extension and "no ray pass-through hits"
-    /// play the same role.)
+    /// play the same role.) Hits at the ground level beneath a voxel do not
+    /// count unless `ground_hits_guard`.
     pub free_guard_voxels: u32,
     /// Earlier sessions' map voxels that this session's points do not
     /// occupy, and whose own points cannot have been ground (at least three,
@@ -112,8 +113,49 @@ pub struct EvidenceConfig {
     /// above the sensor are not limited. 0 disables it. 0.2 m (one voxel)
     /// since it was measured with `n_sat` = 2 (see there); at 0 SemanticKITTI
     /// 04 keeps 99.45 % of its static points instead of 99.74 %
-    /// (`evidence::surface`).
+    /// (`evidence::surface`). Only rays that end at the ground, with
+    /// `clearance_near_ground_only`.
     pub free_clearance_m: f64,
+    /// `free_clearance_m` applies only to rays that end at their column's
+    /// ground level (`evidence::ground`: within one voxel of the lowest
+    /// voxel the session's points occupy in that column). A ray ending on a
+    /// car, a person or a wall does not graze the ground on its way, and the
+    /// clearance only kept it from freeing the voxels at its own height: a
+    /// car driving ahead along the beams, whose old places only rays ending
+    /// on its own back cross. false: every downward ray gets the clearance.
+    pub clearance_near_ground_only: bool,
+    /// Whether a keyframe's hits at ground level below a voxel (the layer
+    /// beneath, `evidence::ground`) guard that voxel as `free_guard_voxels`
+    /// says. false: they do not. The ground next to where a mover stood is
+    /// hit by the very keyframes whose rays cross the mover's old place, so
+    /// the guard spared its lowest layers; grazing the ground is what
+    /// `free_clearance_m` guards against. Hits above the ground level
+    /// (a car roof, a wall, a bush) still guard.
+    ///
+    /// This and `clearance_near_ground_only`, in one run of
+    /// `bench/dor_vs_dufomap.py` (store poses; point-wise F1, the two off →
+    /// on, PR after): SemanticKITTI 04 89.13 → 92.86 (PR 99.27 %; DUFOMap
+    /// 86.90 at its defaults, 90.37 at 0.2 m), 08 14.92 → 17.03 (99.02 %;
+    /// DUFOMap 12.88 / 24.04); simulated OS1-64 88.18 → 89.20 (PR 99.01 →
+    /// 98.94 %, the clearance rule's cost: 99.00 % without it), HDL-64E
+    /// 91.28 → 92.57, VLP-16 83.72 → 84.18, HDL-32E 84.84 → 85.33, Avia
+    /// 91.19 → 91.98 (PR 97.78 → 97.70 %). `seam eval changes` on the
+    /// 5 × 150-keyframe sites (permanent kept / removed left): HDL-64E
+    /// 99.27 / 8.12 → 99.25 / 7.90 %, OS1-64 99.25 / 17.72 → 99.22 / 17.28
+    /// %, Avia 98.26 / 45.72 → 98.16 / 44.91 %.
+    ///
+    /// With `examples/dor_probe` (true poses; PR / RR / F1, off → on):
+    /// SemanticKITTI 04 99.45 / 80.75 / 89.13 → 99.27 / 87.22 / 92.86,
+    /// 08 99.21 / 8.07 / 14.92 → 99.02 / 9.32 / 17.03; the DOR bench's
+    /// simulated 60-keyframe sessions (seed 1, true poses): OS1-64 88.97 →
+    /// 90.42, HDL-64E 92.67 → 93.85, VLP-16 84.10 → 84.49, HDL-32E 86.90 →
+    /// 87.39, Avia 91.00 → 91.92 F1, PR down by at most 0.06 points (Avia
+    /// 98.72 → 98.66 %). The clearance rule alone: 04 89.81, 08 16.81 F1 at
+    /// PR 99.40 / 99.17 %. Dropping every hit in the layer beneath from the
+    /// guard, ground or not: 04 92.30 F1 but 08 PR 98.97 %; only the hit
+    /// straight beneath: no change (the mover's old place has ground hits
+    /// beside it too).
+    pub ground_hits_guard: bool,
     /// What a ray must do to free a voxel of interest: cross it (MATH.md §6,
     /// `"voxel"`), or pass through the patch of points the session has in it
     /// (`"surface"`, see `evidence::surface`).
@@ -265,6 +307,8 @@ impl Default for EvidenceConfig {
             vacated_clearance_m: 0.05,
             static_neighbour_veto: false,
             free_clearance_m: 0.2,
+            clearance_near_ground_only: true,
+            ground_hits_guard: false,
             free_test: FreeTest::Surface,
             surface_sigmas: 2.0,
             surface_tolerance_m: 0.03,
