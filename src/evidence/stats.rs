@@ -142,7 +142,10 @@ pub struct EvidenceConfig {
     /// 91.19 → 91.98 (PR 97.78 → 97.70 %). `seam eval changes` on the
     /// 5 × 150-keyframe sites (permanent kept / removed left): HDL-64E
     /// 99.27 / 8.12 → 99.25 / 7.90 %, OS1-64 99.25 / 17.72 → 99.22 / 17.28
-    /// %, Avia 98.26 / 45.72 → 98.16 / 44.91 %.
+    /// %, HDL-32E 99.40 / 13.01 → 99.38 / 12.43 %, VLP-16 99.31 / 17.93 →
+    /// 99.29 / 17.19 %, Avia 98.26 / 45.72 → 98.16 / 44.91 %; mover voxels
+    /// in the static map 0.09-0.28 % of it (0.11-0.37 % before), object
+    /// changes with events in the right session 91.4-98.9 % (unchanged).
     ///
     /// With `examples/dor_probe` (true poses; PR / RR / F1, off → on):
     /// SemanticKITTI 04 99.45 / 80.75 / 89.13 → 99.27 / 87.22 / 92.86,
