@@ -733,33 +733,26 @@ mod tests {
         assert!(walls > 100 && spread_x * 4 > walls, "{spread_x} of {walls} wall voxels spread along x");
     }
 
+    /// Keyframe `i` has scan `i` at pose `i`, in submap `i / per_submap`.
+    fn inputs_of<'a>(scans: &'a [Vec<[f32; 3]>], poses: &[Pose], per_submap: usize) -> Vec<KeyframeInput<'a>> {
+        scans
+            .iter()
+            .zip(poses)
+            .enumerate()
+            .map(|(i, (pts, t))| KeyframeInput {
+                index: i as u32,
+                submap: i / per_submap,
+                t_world_keyframe: *t,
+                points: pts,
+            })
+            .collect()
+    }
+
     /// A spinning sensor (64 beams over ±22.5°, 512 columns) at 1.8 m on a
     /// road past a wall along y = 15 m (x in ±50 m, 40 m tall): returns from
     /// the ground and the wall, nothing from the open sky to the south.
     fn road_and_wall_scan(origin: [f64; 3]) -> Vec<[f32; 3]> {
-        let mut out = Vec::new();
-        for b in 0..64 {
-            let el = (-22.5 + 45.0 * b as f64 / 63.0f64).to_radians();
-            for c in 0..512 {
-                let az = std::f64::consts::TAU * c as f64 / 512.0;
-                let d = [el.cos() * az.cos(), el.cos() * az.sin(), el.sin()];
-                let mut t = f64::INFINITY;
-                if d[2] < 0.0 {
-                    t = t.min(-origin[2] / d[2]);
-                }
-                if d[1] > 0.0 {
-                    let tw = (15.0 - origin[1]) / d[1];
-                    let (x, z) = (origin[0] + tw * d[0], origin[2] + tw * d[2]);
-                    if x.abs() < 50.0 && (0.0..40.0).contains(&z) {
-                        t = t.min(tw);
-                    }
-                }
-                if t <= 100.0 {
-                    out.push(d.map(|x| (x * t) as f32));
-                }
-            }
-        }
-        out
+        spin_scan(origin, 512, 100.0, &[([-50.0, 15.0, 0.0], [50.0, 16.0, 40.0])])
     }
 
     #[test]
@@ -768,12 +761,7 @@ mod tests {
             .map(|i| Pose::from_parts(Translation3::new(i as f64 * 2.0 - 5.0, 0.0, 1.8), UnitQuaternion::identity()))
             .collect();
         let scans: Vec<Vec<[f32; 3]>> = poses.iter().map(|p| road_and_wall_scan(p.translation.vector.into())).collect();
-        let inputs: Vec<KeyframeInput<'_>> = scans
-            .iter()
-            .zip(&poses)
-            .enumerate()
-            .map(|(i, (pts, t))| KeyframeInput { index: i as u32, submap: i / 3, t_world_keyframe: *t, points: pts })
-            .collect();
+        let inputs = inputs_of(&scans, &poses, 3);
         let v = 0.2;
         let patch = |p: [f64; 3]| MapPatch {
             key: packed_key(&p, v).unwrap(),
@@ -849,15 +837,16 @@ mod tests {
         assert_eq!(row_in(&generate(&tip_inputs, &map, Some(&band), &anywhere, |_| {}), jib).no_return_n, 6);
     }
 
-    /// A 64-beam spinning sensor (±22.5°, 720 columns) at `origin` over flat
-    /// ground (z = 0) with axis-aligned boxes `[lo, hi]`: the first return of
-    /// each beam within 60 m, in the sensor frame (no rotation).
-    fn boxes_scan(origin: [f64; 3], boxes: &[([f64; 3], [f64; 3])]) -> Vec<[f32; 3]> {
+    /// A 64-beam spinning sensor (±22.5°, `columns` per turn) at `origin`
+    /// over flat ground (z = 0) with axis-aligned boxes `[lo, hi]`: the first
+    /// return of each beam within `max_range_m`, in the sensor frame (no
+    /// rotation).
+    fn spin_scan(origin: [f64; 3], columns: usize, max_range_m: f64, boxes: &[([f64; 3], [f64; 3])]) -> Vec<[f32; 3]> {
         let mut out = Vec::new();
         for b in 0..64 {
             let el = (-22.5 + 45.0 * b as f64 / 63.0f64).to_radians();
-            for c in 0..720 {
-                let az = std::f64::consts::TAU * c as f64 / 720.0;
+            for c in 0..columns {
+                let az = std::f64::consts::TAU * c as f64 / columns as f64;
                 let d = [el.cos() * az.cos(), el.cos() * az.sin(), el.sin()];
                 let mut t = if d[2] < 0.0 { -origin[2] / d[2] } else { f64::INFINITY };
                 for (lo, hi) in boxes {
@@ -872,7 +861,7 @@ mod tests {
                         t = t.min(t0);
                     }
                 }
-                if t <= 60.0 {
+                if t <= max_range_m {
                     out.push(d.map(|x| (x * t) as f32));
                 }
             }
@@ -903,13 +892,8 @@ mod tests {
         };
         let wall = ([40.0, -30.0, 0.0], [41.0, 30.0, 6.0]);
         let scans: Vec<Vec<[f32; 3]>> =
-            (0..n).map(|i| boxes_scan(poses[i].translation.vector.into(), &[car_at(i), wall])).collect();
-        let inputs: Vec<KeyframeInput<'_>> = scans
-            .iter()
-            .zip(&poses)
-            .enumerate()
-            .map(|(i, (pts, t))| KeyframeInput { index: i as u32, submap: 0, t_world_keyframe: *t, points: pts })
-            .collect();
+            (0..n).map(|i| spin_scan(poses[i].translation.vector.into(), 720, 60.0, &[car_at(i), wall])).collect();
+        let inputs = inputs_of(&scans, &poses, usize::MAX);
         // The first keyframe's points on the car's back: its lowest voxel
         // layer (below 0.4 m, next to the ground) and its middle (0.7-1.2 m).
         let back_x = car_at(0).0[0];
@@ -961,12 +945,7 @@ mod tests {
             .map(|i| Pose::from_parts(Translation3::new(i as f64 * 2.0 - 5.0, 0.0, 1.95), UnitQuaternion::identity()))
             .collect();
         let scans: Vec<Vec<[f32; 3]>> = (0..6).map(|_| road_and_wall_scan([0.0, 0.0, 1.8])).collect();
-        let inputs: Vec<KeyframeInput<'_>> = scans
-            .iter()
-            .zip(&poses)
-            .enumerate()
-            .map(|(i, (pts, t))| KeyframeInput { index: i as u32, submap: 0, t_world_keyframe: *t, points: pts })
-            .collect();
+        let inputs = inputs_of(&scans, &poses, usize::MAX);
         let v = 0.2;
         let at = [0.1, -6.1, 0.3];
         // A container's side (a plane across y), and a piece of ground.
