@@ -524,20 +524,21 @@ impl InterestEvidence {
         let mut sub = Self::on_sorted(keys, self.voxel_m);
         sub.ground = self.ground.clone();
         if !self.unguarded.is_empty() {
-            sub.set_unguarded(idx.iter().map(|&i| bit_set(&self.unguarded, i as usize)));
+            sub.set_unguarded(
+                idx.iter().enumerate().filter(|(_, i)| bit_set(&self.unguarded, **i as usize)).map(|(j, _)| j),
+            );
         }
         (sub, idx)
     }
 
-    /// Marks, row by row, the voxels a keyframe frees next to its own hits
-    /// and down to `EvidenceConfig::vacated_clearance_m` (see
+    /// The rows (indices; those past the end are ignored) a keyframe frees
+    /// next to its own hits and down to
+    /// `EvidenceConfig::vacated_clearance_m` (see
     /// `EvidenceConfig::free_vacated_low`).
-    pub fn set_unguarded(&mut self, flags: impl IntoIterator<Item = bool>) {
+    pub fn set_unguarded(&mut self, rows: impl IntoIterator<Item = usize>) {
         let mut bits = vec![0u64; self.len().div_ceil(64)];
-        for (i, f) in flags.into_iter().enumerate().take(self.len()) {
-            if f {
-                bits[i / 64] |= 1 << (i % 64);
-            }
+        for i in rows.into_iter().filter(|&i| i < self.len()) {
+            bits[i / 64] |= 1 << (i % 64);
         }
         self.unguarded = bits;
     }
@@ -617,11 +618,12 @@ impl InterestEvidence {
                 .map(|p| {
                     // Free voxels of a downward ray that ends at the ground
                     // stop `free_clearance_m` above its endpoint (centre z ≥
-                    // z_min ⇔ key z ≥ kz_min).
-                    let ground_ray =
-                        ground.is_none_or(|g| voxel_key(p, v).is_none_or(|k| g.at_ground(&k.0).unwrap_or(true)));
+                    // z_min ⇔ key z ≥ kz_min). The ground level is looked up
+                    // only for rays that drop enough to need it.
+                    let ground_ray = p[2] < origin_m[2] - CLEARANCE_MIN_DROP_M
+                        && ground.is_none_or(|g| voxel_key(p, v).is_none_or(|k| g.at_ground(&k.0).unwrap_or(true)));
                     let kz_above = |clearance_m: f64| {
-                        if ground_ray && p[2] < origin_m[2] - CLEARANCE_MIN_DROP_M && clearance_m > 0.0 {
+                        if ground_ray && clearance_m > 0.0 {
                             ((p[2] + clearance_m) / v - 0.5).ceil().clamp(i32::MIN as f64, i32::MAX as f64) as i32
                         } else {
                             i32::MIN

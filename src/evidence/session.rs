@@ -149,11 +149,7 @@ pub fn generate(
             .filter_map(|p| session.find(p.key))
             .filter(|&i| !bit_set(&own_rows, i))
             .collect();
-        let mut flags = vec![false; session.len()];
-        for i in vacated {
-            flags[i] = true;
-        }
-        session.set_unguarded(flags);
+        session.set_unguarded(vacated);
     }
     // Map voxels with none of this session's points within about
     // `no_return_clear_m`: the only ones beams that returned nothing may
