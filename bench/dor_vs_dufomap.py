@@ -90,7 +90,7 @@ VOXEL_TOML = '[evidence]\nfree_test = "voxel"\n'
 # Every voxel any ray of another keyframe crossed is dynamic: ε_l > 0 iff the
 # voxel has free evidence (ω's floor 1 so one direction counts; the lower
 # clamp 0 so τ_dyn just above 0 separates f = 0 from f > 0).
-CEILING_TOML = ('[evidence]\nfree_test = "voxel"\nfree_guard_voxels = 0\nfree_clearance_m = 0\n'
+CEILING_TOML = ('[evidence]\nfree_test = "voxel"\nfree_guard_voxels = 0\nfree_guard_deg = 0\nfree_clearance_m = 0\n'
                 'omega_floor = 1\neps_min = 0\ntau_dyn = 0.000001\n')
 SENSORS = "os1-64,hdl-64e,vlp16,hdl-32e,avia"
 DUFOMAP_DEFAULT = "0.1,0.2,1;0.1,0.2,2;0.2,0.2,1"

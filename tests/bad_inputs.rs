@@ -290,6 +290,8 @@ fn bad_evidence_settings_and_dor_inputs() {
     std::fs::write(&nr_elevation, "[evidence]\nno_return_min_elevation_deg = 120.0\n").unwrap();
     let vacated = t.path().join("vacated.toml");
     std::fs::write(&vacated, "[evidence]\nvacated_clearance_m = -0.05\n").unwrap();
+    let guard_deg = t.path().join("guard_deg.toml");
+    std::fs::write(&guard_deg, "[evidence]\nfree_guard_deg = 5.0\n").unwrap();
     for (cfg, fragment) in [
         (&model, "octomap"),
         (&clearance, "free_clearance_m"),
@@ -303,6 +305,7 @@ fn bad_evidence_settings_and_dor_inputs() {
         (&nr_margin, "no_return_margin_deg"),
         (&nr_elevation, "no_return_min_elevation_deg"),
         (&vacated, "vacated_clearance_m"),
+        (&guard_deg, "free_guard_deg"),
     ] {
         let o = run(&["--config", cfg.to_str().unwrap(), "ingest", st, dir]);
         assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));

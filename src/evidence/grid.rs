@@ -727,7 +727,10 @@ impl InterestEvidence {
         let (lo, hi) = self.x_range(&marks.b);
         let v = self.voxel_m;
         let (l_hit, l_miss, l_min, l_max) = cfg.log_odds.log_odds();
-        let guard = cfg.free_guard_voxels as i32;
+        // The guard's radius: `free_guard_voxels`, widened with range to the
+        // lateral spread `free_guard_deg` makes there.
+        let guard_rad = cfg.free_guard_deg.to_radians();
+        let guard_voxels = |r_m: f64| (cfg.free_guard_voxels as i32).max((r_m * guard_rad / v).ceil() as i32);
         let ground = self.ground.as_deref().filter(|_| !cfg.ground_hits_guard);
         let keys = &self.keys[lo..hi];
         let unguarded = &self.unguarded;
@@ -758,7 +761,7 @@ impl InterestEvidence {
                     return;
                 }
                 let guarded = || {
-                    marks.hit_near(&k, guard, ground)
+                    marks.hit_near(&k, guard_voxels(ray_to_centre(VoxelKey(k), origin_m, v).1), ground)
                         && !self_unguarded(i)
                         && !shapes.and_then(|s| s.get(pk)).is_some_and(|s| s.from_map)
                 };
@@ -905,8 +908,13 @@ mod tests {
     #[test]
     fn interest_rows_equal_full_map_on_their_voxels() {
         let mut rng = ChaCha8Rng::seed_from_u64(9);
-        let cfg =
-            EvidenceConfig { pseudo_count: 0.05, free_guard_voxels: 0, free_clearance_m: 0.0, ..Default::default() };
+        let cfg = EvidenceConfig {
+            pseudo_count: 0.05,
+            free_guard_voxels: 0,
+            free_guard_deg: 0.0,
+            free_clearance_m: 0.0,
+            ..Default::default()
+        };
         let frames: Vec<([f64; 3], Vec<[f64; 3]>)> = (0..5)
             .map(|i| {
                 let o = [i as f64 * 2.5, 0.3 * i as f64, 1.5];
@@ -980,6 +988,31 @@ mod tests {
         assert!(l.volume() <= 1 << 20);
         assert!(l.contains(&[5, -7, 0]));
         assert_eq!((l.lo[2], l.hi[2]), (-10, 10));
+    }
+
+    /// The own-hit guard widens with range (`free_guard_deg`): a ray through
+    /// a voxel two voxels beside the keyframe's own hit frees it at 10 m
+    /// (guard 1) but not at 50 m (guard ⌈50 m · 0.4° / 0.2 m⌉ = 2), unless
+    /// the angle is 0.
+    #[test]
+    fn own_hit_guard_widens_with_range() {
+        let o = [0.1, 0.1, 1.1];
+        let freed = |x: f64, cfg: &EvidenceConfig| {
+            let target = [x, 0.1, 1.1];
+            let beside = [x, 0.1 + 0.4, 1.1];
+            let behind = [x + 3.0, 0.1, 1.1];
+            let keys: Vec<u64> = [target, beside, behind].iter().filter_map(|p| packed_key(p, 0.2)).collect();
+            let mut ev = InterestEvidence::new(keys, 0.2);
+            ev.add_keyframe(&o, &[beside, behind], 0, cfg, None);
+            let i = ev.find(packed_key(&target, 0.2).unwrap()).unwrap();
+            ev.rows()[i].free_n
+        };
+        let cfg = EvidenceConfig::default();
+        assert_eq!((cfg.free_guard_voxels, cfg.free_guard_deg), (1, 0.4));
+        assert_eq!(freed(10.1, &cfg), 1);
+        assert_eq!(freed(50.1, &cfg), 0);
+        assert_eq!(freed(50.1, &EvidenceConfig { free_guard_deg: 0.0, ..cfg.clone() }), 1);
+        assert_eq!(freed(10.1, &EvidenceConfig { free_guard_voxels: 2, ..cfg }), 0);
     }
 
     /// The scalar baseline: a voxel hit then freed more often flips to free

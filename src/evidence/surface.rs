@@ -529,7 +529,8 @@ mod tests {
     #[test]
     fn rays_beside_a_tube_free_it_only_under_the_voxel_rule() {
         use super::super::grid::InterestEvidence;
-        let cfg = EvidenceConfig { free_clearance_m: 0.0, free_guard_voxels: 0, ..Default::default() };
+        let cfg =
+            EvidenceConfig { free_clearance_m: 0.0, free_guard_voxels: 0, free_guard_deg: 0.0, ..Default::default() };
         let v = cfg.voxel_size_m;
         let pts = tube();
         let key = packed_key(&pts[0], v).unwrap();
