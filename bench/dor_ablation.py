@@ -16,7 +16,10 @@ same rays:
 1. Per dataset (SemanticKITTI sequences; one simulated session per sensor,
    `seam simulate --sessions 1`, the same recipe as `dor_vs_dufomap.py`),
    `seam ingest` into a store with the default config ("seam") and into one
-   with `[evidence] model = "log_odds"` ("seam-scalar").
+   with `[evidence] model = "log_odds"` ("seam-scalar"), both with the
+   growth step off (`grow_max_hits = 0`, `evidence::grow`): it works on the
+   verdicts either model gives, so it is no part of the evidence model this
+   compares, and a grown point's verdict is not its voxel's ε > τ.
 2. `seam export STORE OUT --tables point_labels`: every point's clamped ε of
    its voxel (ε_l, or 1 − P(occupied) for the scalar model). A point is
    removed at threshold τ when ε > τ, the rule DOR applies at τ_dyn (checked:
@@ -77,7 +80,8 @@ def curve(cols, truth_of):
     mismatch = int(((eps > TAU_DEFAULT) != stored).sum())
     if mismatch:
         raise SystemExit(f"dor_ablation: {mismatch} points' stored verdict is not ε > {TAU_DEFAULT}: the store's "
-                         "config has another tau_dyn or the static-neighbour veto; this script assumes neither")
+                         "config has another tau_dyn, the static-neighbour veto or the growth step; this "
+                         "script assumes none of them")
     static, dynamic = ~truth, truth
     n_s, n_d = static.sum(), dynamic.sum()
     pr = np.array([((eps <= t) & static).sum() / n_s for t in TAUS])
@@ -113,8 +117,11 @@ def main():
 
     work, binary = seam_in_work("dor_ablation", args.seam, args.no_build, args.out, "dor_ablation-")
     seam = Seam(binary)
+    no_grow = "grow_max_hits = 0\n"
+    seam_cfg = work / "directional_no_grow.toml"
+    seam_cfg.write_text("[evidence]\n" + no_grow)
     scalar_cfg = work / "log_odds.toml"
-    scalar_cfg.write_text(SCALAR_TOML)
+    scalar_cfg.write_text(SCALAR_TOML + no_grow)
 
     datasets = datasets_of(args, work, seam, "dor_ablation")
 
@@ -123,7 +130,7 @@ def main():
     lines = [head, "-" * len(head)]
     for name, d in datasets:
         curves = {}
-        for model, cfg in (("seam", None), ("seam-scalar", scalar_cfg)):
+        for model, cfg in (("seam", seam_cfg), ("seam-scalar", scalar_cfg)):
             log(f"[{name}] ingest ({model})")
             store = work / "stores" / name / f"{model}.seam"
             store.parent.mkdir(parents=True, exist_ok=True)

@@ -16,16 +16,17 @@ simulated session per sensor model (`seam simulate OUT --sessions 1 --sensor S
 Per dataset:
 
 1. `seam init` + `seam ingest` into a fresh store with the default config
-   ("seam", directional evidence with the surface free test), into another
-   with `[evidence] model = "log_odds"` ("seam-scalar", same rays and test)
-   and into a third with `[evidence] free_test = "voxel"` ("seam
-   voxel-rule": the paper's rule, every voxel a ray crosses is free), and
-   into a fourth with CEILING_TOML ("any-free-ray ceiling": a point is
-   removed as soon as any ray of another keyframe crossed its voxel, with no
-   guard, no clearance, no surface test and no weighing against hits). That
-   row's PR is meaningless; its RR is the share of moving points that any
-   method removing only space some ray saw empty can reach at 0.2 m, and
-   2·RR/(1+RR) the F1 it allows at a PR of 100 %.
+   ("seam", directional evidence with the surface free test and the growth
+   step), into another with `[evidence] model = "log_odds"` ("seam-scalar",
+   same rays, test and growth), into a third with `[evidence] free_test =
+   "voxel"` ("seam voxel-rule": the paper's rule, every voxel a ray crosses
+   is free), and into a fourth with CEILING_TOML ("any-free-ray ceiling": a
+   point is removed as soon as any ray of another keyframe crossed its
+   voxel, with no guard, no clearance, no surface test, no weighing against
+   hits and no growth step). That row's PR is meaningless; its RR is the
+   share of moving points that any method removing only space some ray saw
+   empty can reach at 0.2 m, and 2·RR/(1+RR) the F1 it allows at a PR of
+   100 %.
 2. `seam poses STORE --session NAME --format kitti` (and `--format json`
    for the keyframe indices) of the seam store: the LiDAR world poses DUFOMap
    gets, so both see the same scans at the same poses.
@@ -91,7 +92,7 @@ VOXEL_TOML = '[evidence]\nfree_test = "voxel"\n'
 # voxel has free evidence (ω's floor 1 so one direction counts; the lower
 # clamp 0 so τ_dyn just above 0 separates f = 0 from f > 0).
 CEILING_TOML = ('[evidence]\nfree_test = "voxel"\nfree_guard_voxels = 0\nfree_guard_deg = 0\nfree_clearance_m = 0\n'
-                'omega_floor = 1\neps_min = 0\ntau_dyn = 0.000001\n')
+                'omega_floor = 1\neps_min = 0\ntau_dyn = 0.000001\ngrow_max_hits = 0\n')
 SENSORS = "os1-64,hdl-64e,vlp16,hdl-32e,avia"
 DUFOMAP_DEFAULT = "0.1,0.2,1;0.1,0.2,2;0.2,0.2,1"
 

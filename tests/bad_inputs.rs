@@ -292,6 +292,10 @@ fn bad_evidence_settings_and_dor_inputs() {
     std::fs::write(&vacated, "[evidence]\nvacated_clearance_m = -0.05\n").unwrap();
     let guard_deg = t.path().join("guard_deg.toml");
     std::fs::write(&guard_deg, "[evidence]\nfree_guard_deg = 5.0\n").unwrap();
+    let grow_depth = t.path().join("grow_depth.toml");
+    std::fs::write(&grow_depth, "[evidence]\ngrow_depth_voxels = 40\n").unwrap();
+    let grow_hits = t.path().join("grow_hits.toml");
+    std::fs::write(&grow_hits, "[evidence]\ngrow_max_hits = -1\n").unwrap();
     for (cfg, fragment) in [
         (&model, "octomap"),
         (&clearance, "free_clearance_m"),
@@ -306,6 +310,8 @@ fn bad_evidence_settings_and_dor_inputs() {
         (&nr_elevation, "no_return_min_elevation_deg"),
         (&vacated, "vacated_clearance_m"),
         (&guard_deg, "free_guard_deg"),
+        (&grow_depth, "grow_depth_voxels"),
+        (&grow_hits, "grow_max_hits"),
     ] {
         let o = run(&["--config", cfg.to_str().unwrap(), "ingest", st, dir]);
         assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));

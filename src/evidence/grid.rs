@@ -553,6 +553,11 @@ impl InterestEvidence {
         self.ground = Some(Arc::new(ground));
     }
 
+    /// The ground level given by [`Self::set_ground`], if any.
+    pub fn ground(&self) -> Option<&GroundLevel> {
+        self.ground.as_deref()
+    }
+
     /// Indices of the keys whose x lies in the box's x range.
     fn x_range(&self, b: &Box3) -> (usize, usize) {
         if b.is_empty() {

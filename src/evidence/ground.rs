@@ -54,6 +54,13 @@ impl GroundLevel {
         self.lowest_kz.get(&(k[0], k[1])).map(|&low| k[2] <= low.saturating_add(GROUND_BAND_VOXELS))
     }
 
+    /// Whether voxel `k` is its column's lowest occupied voxel (`false`
+    /// when the column holds none).
+    #[inline]
+    pub fn is_lowest(&self, k: &[i32; 3]) -> bool {
+        self.lowest_kz.get(&(k[0], k[1])).is_some_and(|&low| k[2] <= low)
+    }
+
     pub fn columns(&self) -> usize {
         self.lowest_kz.len()
     }

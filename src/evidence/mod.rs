@@ -34,6 +34,7 @@
 //! - `surface.rs`: the sub-voxel free test ([`surface::SurfaceShapes`])
 //! - `ground.rs`: each voxel column's ground level, for the clearance and
 //!   the guard ([`ground::GroundLevel`])
+//! - `grow.rs`: DOR's growth of a keyframe's dynamic verdict into unseen neighbours ([`grow::keyframe_dynamic`])
 //! - `no_return.rs`: free evidence from beams that returned nothing ([`no_return::NoReturnImage`])
 //! - `accumulate.rs`: [`accumulate_keyframe`] and its parallel twin
 //!   [`accumulate_keyframe_par`] into an [`EvidenceMap`]
@@ -41,6 +42,7 @@
 mod accumulate;
 pub mod grid;
 pub mod ground;
+pub mod grow;
 pub mod no_return;
 mod raycast;
 pub mod session;

@@ -25,6 +25,7 @@
 
 use super::grid::{Box3, InterestEvidence, RayStats, Row, bit_set, pack, packed_key, row_of, unpack};
 use super::ground::GroundLevel;
+use super::grow::keyframe_dynamic;
 use super::no_return::{NoReturn, NoReturnImage};
 use super::raycast::voxel_key;
 use super::stats::{EvidenceConfig, FreeTest};
@@ -76,6 +77,8 @@ pub struct GenerationStats {
     pub generated_voxels: usize,
     pub dynamic_voxels: usize,
     pub dynamic_points: usize,
+    /// Of those, the points made dynamic by the growth step (`evidence::grow`).
+    pub grown_points: usize,
     pub cleaned_voxels: usize,
     pub raycast_s: f64,
     pub total_s: f64,
@@ -132,7 +135,7 @@ pub fn generate(
         keys.extend_from_slice(k);
     }
     let mut session = InterestEvidence::new(keys, v);
-    if cfg.clearance_near_ground_only || !cfg.ground_hits_guard {
+    if cfg.clearance_near_ground_only || !cfg.ground_hits_guard || cfg.grow_max_hits > 0 {
         session.set_ground(GroundLevel::from_keys(per_kf.iter().flat_map(|(k, _)| k)));
     }
     // Rows some point of this session occupies: what vacated map voxels and
@@ -241,11 +244,20 @@ pub fn generate(
     let eps = session.eps_l(cfg);
     let dynamic = dynamic_voxels(&session, &eps, cfg);
     stats.dynamic_voxels = dynamic.iter().filter(|&&d| d).count();
-    let labels = label_points(keyframes, &session, &eps, &dynamic, cfg);
+    // Each point's verdict: its voxel's, grown within its keyframe (evidence::grow).
+    let (point_dynamic, grown): (Vec<Vec<bool>>, Vec<usize>) = keyframes
+        .par_iter()
+        .map(|kf| keyframe_dynamic(&world_points(kf), &session, &dynamic, session.ground(), cfg))
+        .unzip();
+    let labels = label_points(keyframes, &point_dynamic, &session, &eps, cfg);
     stats.dynamic_points = labels.dynamic.iter().filter(|&&d| d).count();
+    stats.grown_points = grown.iter().sum();
     let cleaned: Vec<CleanedMap> = (0..n_submaps)
         .into_par_iter()
-        .map(|s| cleaned_map(keyframes.iter().filter(|k| k.submap == s), &session, &eps, &dynamic))
+        .map(|s| {
+            let of_submap = keyframes.iter().zip(&point_dynamic).filter(|(k, _)| k.submap == s);
+            cleaned_map(of_submap, &session, &eps)
+        })
         .collect();
     stats.cleaned_voxels = cleaned.iter().map(CleanedMap::len).sum();
     stats.total_s = started.elapsed().as_secs_f64();
@@ -318,16 +330,19 @@ fn row_at(session: &InterestEvidence, p: &[f64; 3]) -> Option<usize> {
     packed_key(p, session.voxel_m).and_then(|k| session.find(k))
 }
 
+/// Every point's label; `point_dynamic` is each keyframe's verdict per point
+/// ([`keyframe_dynamic`]).
 fn label_points(
     keyframes: &[KeyframeInput<'_>],
+    point_dynamic: &[Vec<bool>],
     session: &InterestEvidence,
     eps: &[f32],
-    dynamic: &[bool],
     cfg: &EvidenceConfig,
 ) -> PointLabels {
     let parts: Vec<PointLabels> = keyframes
         .par_iter()
-        .map(|kf| {
+        .zip(point_dynamic)
+        .map(|(kf, dynamic)| {
             let pts = world_points(kf);
             let mut l = PointLabels::default();
             for (j, p) in pts.iter().enumerate() {
@@ -336,7 +351,7 @@ fn label_points(
                 let i = row_at(session, p);
                 l.keyframe.push(kf.index as i32);
                 l.point_index.push(j as i32);
-                l.dynamic.push(i.is_some_and(|i| dynamic[i]));
+                l.dynamic.push(dynamic[j]);
                 l.eps_l.push(i.map_or(cfg.eps_min as f32, |i| eps[i]));
             }
             l
@@ -352,12 +367,12 @@ fn label_points(
     out
 }
 
-/// The static points of a submap's keyframes, one centroid per voxel.
+/// The static points of a submap's keyframes (each with its points'
+/// verdicts), one centroid per voxel.
 fn cleaned_map<'a>(
-    keyframes: impl Iterator<Item = &'a KeyframeInput<'a>>,
+    keyframes: impl Iterator<Item = (&'a KeyframeInput<'a>, &'a Vec<bool>)>,
     session: &InterestEvidence,
     eps: &[f32],
-    dynamic: &[bool],
 ) -> CleanedMap {
     struct Acc {
         /// The points, as offsets from the voxel centre.
@@ -368,13 +383,10 @@ fn cleaned_map<'a>(
     }
     let v = session.voxel_m;
     let mut voxels: FxHashMap<u64, Acc> = FxHashMap::default();
-    for kf in keyframes {
-        for p in world_points(kf) {
-            let Some(k) = packed_key(&p, v) else { continue };
+    for (kf, dynamic) in keyframes {
+        for (p, _) in world_points(kf).iter().zip(dynamic).filter(|(_, d)| !**d) {
+            let Some(k) = packed_key(p, v) else { continue };
             let Some(i) = session.find(k) else { continue };
-            if dynamic[i] {
-                continue;
-            }
             let a = voxels.entry(k).or_insert(Acc {
                 moments: Moments::default(),
                 eps: eps[i],

@@ -132,6 +132,13 @@ pub struct EvidenceConfig {
     /// in patches, but its patches touch parts that were not; a mover stands
     /// in free space. (DUFOMap's "unknown inflation" d_p plays this role.)
     pub static_neighbour_veto: bool,
+    /// DOR's growth step (`evidence::grow`): a keyframe's dynamic verdict
+    /// spreads to 26-neighbouring voxels of its own points that at most this
+    /// many keyframes hit and none saw free, except a column's lowest voxel.
+    /// 0 disables it. Numbers in `evidence::grow`'s docs.
+    pub grow_max_hits: u32,
+    /// ... at most this many voxel steps from a voxel dynamic by ε_l.
+    pub grow_depth_voxels: u32,
     /// A ray that ends below the sensor (by 0.5 m or more) frees only voxels
     /// whose centre is at least this much above its endpoint. Rays to the ground graze it for
     /// metres before they end (at 40 m a ray from 1.7 m height runs within one
@@ -337,6 +344,8 @@ impl Default for EvidenceConfig {
             free_vacated_low: true,
             vacated_clearance_m: 0.05,
             static_neighbour_veto: false,
+            grow_max_hits: 2,
+            grow_depth_voxels: 2,
             free_clearance_m: 0.2,
             clearance_near_ground_only: true,
             ground_hits_guard: false,
@@ -385,6 +394,12 @@ impl EvidenceConfig {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(format!("evidence.{name} is {v}; it must be zero or a positive number"));
             }
+        }
+        if self.grow_depth_voxels > 8 {
+            return Err(format!(
+                "evidence.grow_depth_voxels is {}; it must lie in 0..=8 voxel steps (default 2; 0 turns growth off)",
+                self.grow_depth_voxels
+            ));
         }
         if !(0.0..=2.0).contains(&self.free_guard_deg) {
             return Err(format!(

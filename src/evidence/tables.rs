@@ -106,6 +106,9 @@ pub struct PointLabels {
     pub keyframe: Vec<i32>,
     /// The point's index in its scan file.
     pub point_index: Vec<i32>,
+    /// The verdict: the voxel's (ε_l > τ_dyn), or grown into from its
+    /// keyframe's dynamic neighbours (`evidence::grow`), so a dynamic point
+    /// may have ε_l ≤ τ_dyn.
     pub dynamic: Vec<bool>,
     /// Clamped ε_l of the point's voxel.
     pub eps_l: Vec<f32>,

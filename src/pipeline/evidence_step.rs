@@ -160,6 +160,7 @@ pub(super) fn evidence(ctx: &mut StepCtx<'_>, step: &'static str, seq: i64) -> R
         "model": model,
         "points": st.points,
         "dynamic_points": st.dynamic_points,
+        "grown_points": st.grown_points,
         "interest_voxels": st.interest_voxels,
         "map_interest_voxels": map_patches.len(),
         "generated_voxels": st.generated_voxels,
