@@ -39,24 +39,22 @@
 //! from seeds some keyframes saw free twice or more (less RR everywhere);
 //! keeping the ground band's upper voxel too (less RR everywhere).
 
-use super::grid::{InterestEvidence, pack, packed_key, unpack};
+use super::grid::{InterestEvidence, pack, unpack};
 use super::ground::GroundLevel;
 use super::stats::EvidenceConfig;
 use rustc_hash::FxHashMap;
 
 /// One keyframe's DOR verdict per point: its voxel's (`dynamic`, one flag per
 /// row of `session`), then grown as the module says; and how many points the
-/// growth made dynamic. `points_m` are on `session`'s grid; a point without a
-/// row is static.
+/// growth made dynamic. `rows_of` is each point's row in `session` (`None`:
+/// the point has none, and is static).
 pub fn keyframe_dynamic(
-    points_m: &[[f64; 3]],
+    rows_of: &[Option<usize>],
     session: &InterestEvidence,
     dynamic: &[bool],
     ground: Option<&GroundLevel>,
     cfg: &EvidenceConfig,
 ) -> (Vec<bool>, usize) {
-    let v = session.voxel_m;
-    let rows_of: Vec<Option<usize>> = points_m.iter().map(|p| packed_key(p, v).and_then(|k| session.find(k))).collect();
     let mut out: Vec<bool> = rows_of.iter().map(|r| r.is_some_and(|i| dynamic[i])).collect();
     if cfg.grow_max_hits == 0 || cfg.grow_depth_voxels == 0 || !out.iter().any(|&d| d) {
         return (out, 0);
@@ -74,7 +72,6 @@ pub fn keyframe_dynamic(
     };
     let mut frontier: Vec<usize> = voxels.iter().filter(|&(_, &d)| d).map(|(&i, _)| i).collect();
     frontier.sort_unstable();
-    let mut grown = false;
     for _ in 0..cfg.grow_depth_voxels {
         let mut next = Vec::new();
         for &i in &frontier {
@@ -92,19 +89,16 @@ pub fn keyframe_dynamic(
         if next.is_empty() {
             break;
         }
-        grown = true;
         frontier = next;
     }
     let mut added = 0;
-    if grown {
-        for (d, r) in out.iter_mut().zip(&rows_of) {
-            if let Some(i) = r
-                && !*d
-                && voxels[i]
-            {
-                *d = true;
-                added += 1;
-            }
+    for (d, r) in out.iter_mut().zip(rows_of) {
+        if let Some(i) = r
+            && !*d
+            && voxels[i]
+        {
+            *d = true;
+            added += 1;
         }
     }
     (out, added)
@@ -127,8 +121,9 @@ mod tests {
         InterestEvidence::from_parts(&parts, 0.2)
     }
 
-    fn centre(k: [i32; 3]) -> [f64; 3] {
-        k.map(|c| (c as f64 + 0.5) * 0.2)
+    /// The rows of points in the voxels `keys`, one point per entry.
+    fn rows(session: &InterestEvidence, keys: &[[i32; 3]]) -> Vec<Option<usize>> {
+        keys.iter().map(|&k| session.find(pack(VoxelKey(k)).unwrap())).collect()
     }
 
     #[test]
@@ -148,7 +143,7 @@ mod tests {
         ];
         let session = evidence(&cells);
         let dynamic: Vec<bool> = session.keys().iter().map(|&k| unpack(k).0 == [0, 0, 1]).collect();
-        let pts: Vec<[f64; 3]> = cells.iter().map(|c| centre(c.0)).collect();
+        let pts = rows(&session, &cells.map(|c| c.0));
         let floor: Vec<u64> = [[0, 0, 0], [1, 0, 0], [-1, 0, 0]].map(|k| pack(VoxelKey(k)).unwrap()).to_vec();
         let ground = GroundLevel::from_keys(&floor);
         let cfg = EvidenceConfig::default();
@@ -173,7 +168,7 @@ mod tests {
         let cells = [([0, 0, 0], 9, 0), ([0, 0, 1], 1, 3), ([0, 0, 2], 1, 0), ([0, 0, 3], 1, 0)];
         let session = evidence(&cells);
         let dynamic: Vec<bool> = session.keys().iter().map(|&k| unpack(k).0 == [0, 0, 1]).collect();
-        let pts = vec![centre([0, 0, 1]), centre([0, 0, 3]), centre([0, 0, 3])];
+        let pts = rows(&session, &[[0, 0, 1], [0, 0, 3], [0, 0, 3]]);
         let (d, _) = keyframe_dynamic(&pts, &session, &dynamic, None, &EvidenceConfig::default());
         assert_eq!(d, vec![true, false, false]);
     }

@@ -244,18 +244,21 @@ pub fn generate(
     let eps = session.eps_l(cfg);
     let dynamic = dynamic_voxels(&session, &eps, cfg);
     stats.dynamic_voxels = dynamic.iter().filter(|&&d| d).count();
-    // Each point's verdict: its voxel's, grown within its keyframe (evidence::grow).
-    let (point_dynamic, grown): (Vec<Vec<bool>>, Vec<usize>) = keyframes
-        .par_iter()
-        .map(|kf| keyframe_dynamic(&world_points(kf), &session, &dynamic, session.ground(), cfg))
-        .unzip();
-    let labels = label_points(keyframes, &point_dynamic, &session, &eps, cfg);
+    let (labels, grown) = label_points(keyframes, &session, &eps, &dynamic, cfg);
     stats.dynamic_points = labels.dynamic.iter().filter(|&&d| d).count();
-    stats.grown_points = grown.iter().sum();
+    stats.grown_points = grown;
+    // Each keyframe's verdicts: its slice of the labels (in keyframe order).
+    let mut verdicts: Vec<&[bool]> = Vec::with_capacity(keyframes.len());
+    let mut rest = &labels.dynamic[..];
+    for kf in keyframes {
+        let (this, more) = rest.split_at(kf.points.len());
+        verdicts.push(this);
+        rest = more;
+    }
     let cleaned: Vec<CleanedMap> = (0..n_submaps)
         .into_par_iter()
         .map(|s| {
-            let of_submap = keyframes.iter().zip(&point_dynamic).filter(|(k, _)| k.submap == s);
+            let of_submap = keyframes.iter().zip(verdicts.iter().copied()).filter(|(k, _)| k.submap == s);
             cleaned_map(of_submap, &session, &eps)
         })
         .collect();
@@ -330,47 +333,48 @@ fn row_at(session: &InterestEvidence, p: &[f64; 3]) -> Option<usize> {
     packed_key(p, session.voxel_m).and_then(|k| session.find(k))
 }
 
-/// Every point's label; `point_dynamic` is each keyframe's verdict per point
-/// ([`keyframe_dynamic`]).
+/// Every point's label, keyframe after keyframe: its voxel's verdict
+/// (`dynamic`, per row) grown within its keyframe ([`keyframe_dynamic`]);
+/// and how many points the growth made dynamic.
 fn label_points(
     keyframes: &[KeyframeInput<'_>],
-    point_dynamic: &[Vec<bool>],
     session: &InterestEvidence,
     eps: &[f32],
+    dynamic: &[bool],
     cfg: &EvidenceConfig,
-) -> PointLabels {
-    let parts: Vec<PointLabels> = keyframes
+) -> (PointLabels, usize) {
+    let parts: Vec<(PointLabels, usize)> = keyframes
         .par_iter()
-        .zip(point_dynamic)
-        .map(|(kf, dynamic)| {
-            let pts = world_points(kf);
-            let mut l = PointLabels::default();
-            for (j, p) in pts.iter().enumerate() {
-                // A point without a row (non-finite, out of range) is kept:
-                // there is no evidence that it moved.
-                let i = row_at(session, p);
-                l.keyframe.push(kf.index as i32);
-                l.point_index.push(j as i32);
-                l.dynamic.push(dynamic[j]);
-                l.eps_l.push(i.map_or(cfg.eps_min as f32, |i| eps[i]));
-            }
-            l
+        .map(|kf| {
+            // A point without a row (non-finite, out of range) is kept:
+            // there is no evidence that it moved.
+            let rows: Vec<Option<usize>> = world_points(kf).iter().map(|p| row_at(session, p)).collect();
+            let (verdicts, grown) = keyframe_dynamic(&rows, session, dynamic, session.ground(), cfg);
+            let l = PointLabels {
+                keyframe: vec![kf.index as i32; rows.len()],
+                point_index: (0..rows.len() as i32).collect(),
+                dynamic: verdicts,
+                eps_l: rows.iter().map(|i| i.map_or(cfg.eps_min as f32, |i| eps[i])).collect(),
+            };
+            (l, grown)
         })
         .collect();
     let mut out = PointLabels::default();
-    for p in parts {
+    let mut grown = 0;
+    for (p, g) in parts {
         out.keyframe.extend(p.keyframe);
         out.point_index.extend(p.point_index);
         out.dynamic.extend(p.dynamic);
         out.eps_l.extend(p.eps_l);
+        grown += g;
     }
-    out
+    (out, grown)
 }
 
 /// The static points of a submap's keyframes (each with its points'
 /// verdicts), one centroid per voxel.
 fn cleaned_map<'a>(
-    keyframes: impl Iterator<Item = (&'a KeyframeInput<'a>, &'a Vec<bool>)>,
+    keyframes: impl Iterator<Item = (&'a KeyframeInput<'a>, &'a [bool])>,
     session: &InterestEvidence,
     eps: &[f32],
 ) -> CleanedMap {
