@@ -88,36 +88,42 @@ fn main() -> Result<(), String> {
         .enumerate()
         .map(|(i, p)| KeyframeInput { index: i as u32, submap: i / submap_kf, t_world_keyframe: poses[i], points: p })
         .collect();
-    // One rigid motion per submap, about its first keyframe.
     let n_sub = inputs.iter().map(|k| k.submap + 1).max().unwrap_or(0);
-    let motions: Vec<Pose> = (0..n_sub)
-        .map(|s| {
-            let origin = poses[s * submap_kf].translation.vector;
-            let mut r = || rng.random::<f64>() * 2.0 - 1.0;
-            let axis = Vector3::new(r() * 0.3, r() * 0.3, 1.0).normalize();
-            let rot = UnitQuaternion::from_axis_angle(&nalgebra::Unit::new_normalize(axis), r() * rot_deg.to_radians());
-            let t = Vector3::new(r(), r(), r() * 0.3).normalize() * shift_m;
-            // x ↦ R (x - o) + o + t
-            Pose::from_parts(Translation3::from(origin + t - rot * origin), rot)
-        })
-        .collect();
-    let mut now: Vec<Pose> = inputs.iter().map(|k| motions[k.submap] * k.t_world_keyframe).collect();
-    // `--odometry`: the re-optimisation a drifted session gets instead of a
-    // random motion. Evidence is generated on the session's own (odometry)
-    // poses, placed on the truth at the first keyframe, and every keyframe
-    // then moves to its true pose: the drift correction, different for each.
     let odometry = args.iter().any(|a| a == "--odometry");
-    if odometry {
+    let now: Vec<Pose> = if odometry {
+        // The re-optimisation a drifted session gets instead of a random
+        // motion. Evidence is generated on the session's own (odometry)
+        // poses, placed on the truth at the first keyframe, and every
+        // keyframe then moves to its true pose: the drift correction,
+        // different for each.
         if !gt.exists() {
             return Err(format!("--odometry needs the true poses in {}", gt.display()));
         }
         let own: Vec<Pose> = src.keyframes.iter().map(|k| k.t_session_sensor).collect();
-        let place = poses[0] * own[0].inverse();
-        now = poses.clone();
+        let (Some(first_true), Some(first_own)) = (poses.first(), own.first()) else {
+            return Err(format!("{} has no keyframes", dir.display()));
+        };
+        let place = first_true * first_own.inverse();
         for (k, o) in inputs.iter_mut().zip(&own) {
             k.t_world_keyframe = place * o;
         }
-    }
+        poses.clone()
+    } else {
+        // One rigid motion per submap, about its first keyframe.
+        let motions: Vec<Pose> = (0..n_sub)
+            .map(|s| {
+                let origin = poses[s * submap_kf].translation.vector;
+                let mut r = || rng.random::<f64>() * 2.0 - 1.0;
+                let axis = Vector3::new(r() * 0.3, r() * 0.3, 1.0).normalize();
+                let rot =
+                    UnitQuaternion::from_axis_angle(&nalgebra::Unit::new_normalize(axis), r() * rot_deg.to_radians());
+                let t = Vector3::new(r(), r(), r() * 0.3).normalize() * shift_m;
+                // x ↦ R (x - o) + o + t
+                Pose::from_parts(Translation3::from(origin + t - rot * origin), rot)
+            })
+            .collect();
+        inputs.iter().map(|k| motions[k.submap] * k.t_world_keyframe).collect()
+    };
     let base = match args.iter().position(|a| a == "--config").and_then(|i| args.get(i + 1)) {
         Some(path) => seam::config::Config::from_file(std::path::Path::new(path)).map_err(|e| e.to_string())?.evidence,
         None => EvidenceConfig::default(),
