@@ -13,7 +13,13 @@
 //!    over the keyframe's ray box clipped to the interest set's box; bits of
 //!    threads meet through atomic `or`s, which commute, so the order rays are
 //!    cast in does not matter (rays run in parallel); a ray that ends at the
-//!    ground frees nothing within the clearance above its end;
+//!    ground frees nothing within the clearance above its end. Rays walk
+//!    only the interest voxels: the keys as 4×4×4 blocks
+//!    ([`BlockMask`], built once per set) let a ray jump over a block with
+//!    none and pass the others' voxels without marking them (the same
+//!    evidence: `bench/dor_vs_dufomap.py` scores identically, and the
+//!    evidence step runs 1.1-2.0× faster; raycast's tests compare the two
+//!    casts ray by ray);
 //! 2. walk the interest voxels inside the box (in parallel: each row is
 //!    written by one thread), drop the frees next to the keyframe's own hits
 //!    (the guard; hits at the ground level beneath do not guard), and add
@@ -27,7 +33,7 @@
 
 use super::ground::GroundLevel;
 use super::no_return::NoReturn;
-use super::raycast::{cast_ray, voxel_key};
+use super::raycast::{BlockMask, cast_ray, cast_ray_masked, voxel_key};
 use super::stats::{DirectionalStats, EvidenceConfig, EvidenceModel, VoxelEvidence};
 use super::surface::SurfaceShapes;
 use super::tables::{StatsColumns, SubmapEvidence};
@@ -405,6 +411,9 @@ pub struct InterestEvidence {
     unguarded: Vec<u64>,
     /// The ground level of the session's columns ([`Self::set_ground`]).
     ground: Option<Arc<GroundLevel>>,
+    /// The keys as blocks for the rays ([`BlockMask`]), built on first use;
+    /// `None` inside when the bounds are too large for one.
+    blocks: std::sync::OnceLock<Option<BlockMask>>,
 }
 
 /// What one keyframe added.
@@ -482,6 +491,7 @@ impl InterestEvidence {
             bounds,
             unguarded: Vec::new(),
             ground: None,
+            blocks: std::sync::OnceLock::new(),
         }
     }
 
@@ -611,6 +621,9 @@ impl InterestEvidence {
             points_m.iter().filter(|p| voxel_key(p, v).is_some()).count()
         } else {
             let marks = Marks::new(b);
+            // Only interest voxels get evidence: rays report only those and
+            // jump over the blocks that hold none.
+            let mask = self.blocks();
             // Voxels freed only under the lower clearance of the unguarded
             // (vacated map) voxels.
             let band =
@@ -636,7 +649,7 @@ impl InterestEvidence {
                     };
                     let kz_min = kz_above(cfg.free_clearance_m);
                     let kz_band = kz_above(cfg.vacated_clearance_m);
-                    let hit = cast_ray(origin_m, p, v, |k| {
+                    let on_free = |k: VoxelKey| {
                         // A voxel with a shape frees only where the ray
                         // crosses it (evidence::surface).
                         let shape = match &bits {
@@ -655,7 +668,11 @@ impl InterestEvidence {
                         {
                             band.mark(k, FREE)
                         }
-                    });
+                    };
+                    let hit = match mask {
+                        Some(mask) => cast_ray_masked(origin_m, p, v, mask, on_free),
+                        None => cast_ray(origin_m, p, v, on_free),
+                    };
                     if let Some(k) = hit {
                         marks.mark(k, HIT);
                     }
@@ -672,6 +689,18 @@ impl InterestEvidence {
         self.add_free_rows(&sky, origin_m, keyframe, cfg);
         out.no_return_voxels = sky.len();
         out
+    }
+
+    /// The keys as a [`BlockMask`] over the bounds, built once; `None` for
+    /// bounds of more than 2^28 blocks (a 32 MiB bitmap; 13 km × 13 km ×
+    /// 200 m at 0.2 m), whose rays then visit every voxel.
+    fn blocks(&self) -> Option<&BlockMask> {
+        self.blocks
+            .get_or_init(|| {
+                let keys = self.keys.iter().map(|&k| unpack(k).0);
+                BlockMask::new(self.bounds.lo, self.bounds.hi, keys, 1 << 28)
+            })
+            .as_ref()
     }
 
     /// Rows of `nr.candidates` within reach whose direction from the sensor
