@@ -176,8 +176,8 @@ impl BlockMask {
     }
 
     /// Whether voxel `key` is of interest.
-    #[cfg(test)]
-    fn holds(&self, key: &[i32; 3]) -> bool {
+    #[inline]
+    pub fn holds(&self, key: &[i32; 3]) -> bool {
         self.block_voxels(&block_of(key)) & voxel_bit(key) != 0
     }
 }

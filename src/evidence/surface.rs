@@ -51,6 +51,7 @@
 //! sorted keys.
 
 use super::grid::{Box3, packed_key, unpack};
+use super::raycast::BlockMask;
 use super::stats::EvidenceConfig;
 use crate::geometry::{SYM3_PAIRS, Sym3, sym3_matrix};
 use nalgebra::{SymmetricEigen, Vector3};
@@ -275,6 +276,9 @@ pub struct SurfaceShapes {
     /// Packed key → index, for rays (a hash probe is several times faster
     /// than a binary search over a million keys).
     index: FxHashMap<u64, u32>,
+    /// The keys as blocks, so a ray probes `index` only at a voxel that has
+    /// a shape (`None`: bounds too large for one; every voxel is probed).
+    mask: Option<BlockMask>,
 }
 
 impl SurfaceShapes {
@@ -368,7 +372,12 @@ impl SurfaceShapes {
         }
         let mut index = FxHashMap::with_capacity_and_hasher(keys.len(), Default::default());
         index.extend(keys.iter().enumerate().map(|(i, &k)| (k, i as u32)));
-        SurfaceShapes { keys, shapes, index }
+        let mut bounds = Box3::EMPTY;
+        for &k in &keys {
+            bounds.add(unpack(k));
+        }
+        let mask = BlockMask::new(bounds.lo, bounds.hi, keys.iter().map(|&k| unpack(k).0), 1 << 28);
+        SurfaceShapes { keys, shapes, index, mask }
     }
 
     pub fn len(&self) -> usize {
@@ -384,46 +393,12 @@ impl SurfaceShapes {
         self.index.get(&key).map(|&i| &self.shapes[i as usize])
     }
 
-    /// A bitmap over `b` of the 4×4×4 blocks that hold a voxel with a
-    /// shape, so a ray probes [`Self::get`] only near one. Blocks, not
-    /// voxels: a voxel bitmap over a keyframe's ray box is up to 32 MB, and
-    /// setting bits across it faults in pages every keyframe.
-    pub(super) fn bits_in(&self, b: &Box3) -> ShapeBits {
-        let blocks = Box3 { lo: b.lo.map(|x| x >> BLOCK_SHIFT), hi: b.hi.map(|x| x >> BLOCK_SHIFT) };
-        let dims = blocks.dims();
-        let mut words = vec![0u64; (blocks.volume().div_ceil(64)) as usize];
-        let (lo, hi) = b.packed_x_range(&self.keys);
-        for &k in &self.keys[lo..hi] {
-            let k = unpack(k).0;
-            if b.contains(&k) {
-                let i = blocks.index_of(&k.map(|x| x >> BLOCK_SHIFT), &dims);
-                words[(i / 64) as usize] |= 1 << (i % 64);
-            }
-        }
-        ShapeBits { blocks, dims, words }
-    }
-}
-
-/// Which voxels of a box have a shape (see [`SurfaceShapes::bits_in`]).
-pub(super) struct ShapeBits {
-    blocks: Box3,
-    dims: [u64; 3],
-    words: Vec<u64>,
-}
-
-/// Blocks of 2^2 = 4 voxels per axis.
-const BLOCK_SHIFT: i32 = 2;
-
-impl ShapeBits {
-    /// Whether the block of voxel `k` may hold a shape.
+    /// Whether voxel `k` may have a shape: exact where the keys fit a
+    /// [`BlockMask`], so [`Self::get`]'s hash probe runs only for the ones
+    /// that do.
     #[inline]
-    pub(super) fn has(&self, k: &[i32; 3]) -> bool {
-        let k = k.map(|x| x >> BLOCK_SHIFT);
-        if !self.blocks.contains(&k) {
-            return false;
-        }
-        let i = self.blocks.index_of(&k, &self.dims);
-        self.words[(i / 64) as usize] >> (i % 64) & 1 != 0
+    pub(super) fn may_have(&self, k: &[i32; 3]) -> bool {
+        self.mask.as_ref().is_none_or(|m| m.holds(k))
     }
 }
 
