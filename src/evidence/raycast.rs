@@ -40,7 +40,7 @@ pub fn voxel_key(p_m: &[f64; 3], voxel_m: f64) -> Option<VoxelKey> {
 /// length L visits at most `3·L/voxel_m + 1` voxels: very long rays are slow
 /// but finite.
 pub fn traverse(origin_m: &[f64; 3], end_m: &[f64; 3], voxel_m: f64, mut f: impl FnMut(VoxelKey)) -> usize {
-    walk(origin_m, end_m, voxel_m, &Unmasked, |k, _| f(k))
+    walk(origin_m, end_m, voxel_m, &Unmasked, |k, _| f(k)).map_or(0, |(visited, _)| visited)
 }
 
 /// Which voxels a walk reports. [`Unmasked`] reports all; [`BlockMask`]
@@ -196,7 +196,9 @@ impl Skip for BlockMask {
 
 /// The walk behind [`traverse`] and the casts: calls `f(key, remaining)`
 /// for every voxel visited, `remaining` the steps still to go (0 at the
-/// endpoint's voxel). With a skipping `mask`, only its voxels of interest
+/// endpoint's voxel), and returns the number of steps walked one voxel at
+/// a time and the endpoint's voxel (`None`, visiting nothing, for the rays
+/// [`traverse`] refuses). With a skipping `mask`, only its voxels of interest
 /// are reported, and empty blocks the endpoint is not in are left by
 /// [`jump_empty`] instead of walked. A jump moves each axis at most to the
 /// block entered and never past the endpoint's key, so the walk still ends
@@ -207,12 +209,12 @@ fn walk<S: Skip>(
     voxel_m: f64,
     mask: &S,
     mut f: impl FnMut(VoxelKey, u64),
-) -> usize {
+) -> Option<(usize, VoxelKey)> {
     if !(voxel_m.is_finite() && voxel_m > 0.0) {
-        return 0;
+        return None;
     }
     let (Some(start), Some(stop)) = (voxel_key(origin_m, voxel_m), voxel_key(end_m, voxel_m)) else {
-        return 0;
+        return None;
     };
     let mut key = start.0;
     let stop = stop.0;
@@ -238,10 +240,9 @@ fn walk<S: Skip>(
     }
     let mut visited = 1;
     // The current block's voxels of interest (all, unmasked).
-    let mut here = if S::SKIPS { mask.block_voxels(&block_of(&key)) } else { u64::MAX };
-    if S::SKIPS && here == 0 {
-        remaining = jump_empty(&mut key, &stop, &step, &mut t_max, &t_delta, mask, remaining);
-        here = mask.block_voxels(&block_of(&key));
+    let mut here = u64::MAX;
+    if S::SKIPS {
+        (remaining, here) = enter_block(&mut key, &stop, &step, &mut t_max, &t_delta, mask, remaining);
     }
     if !S::SKIPS || here & voxel_bit(&key) != 0 {
         f(VoxelKey(key), remaining);
@@ -261,12 +262,7 @@ fn walk<S: Skip>(
         visited += 1;
         if S::SKIPS {
             if (key[axis] >> BLOCK_SHIFT) != (before >> BLOCK_SHIFT) {
-                here = mask.block_voxels(&block_of(&key));
-                if here == 0 {
-                    // Stays 0 only in the endpoint's own block: walked, not reported.
-                    remaining = jump_empty(&mut key, &stop, &step, &mut t_max, &t_delta, mask, remaining);
-                    here = mask.block_voxels(&block_of(&key));
-                }
+                (remaining, here) = enter_block(&mut key, &stop, &step, &mut t_max, &t_delta, mask, remaining);
             }
             if here & voxel_bit(&key) == 0 {
                 continue;
@@ -274,7 +270,28 @@ fn walk<S: Skip>(
         }
         f(VoxelKey(key), remaining);
     }
-    visited
+    Some((visited, VoxelKey(stop)))
+}
+
+/// On entering the block of `key`: the steps still to go and the voxels of
+/// interest of the block the walk goes on in. An empty block is left by
+/// [`jump_empty`]; the block returned is then 0 only if it is the
+/// endpoint's own, walked but not reported.
+fn enter_block<S: Skip>(
+    key: &mut [i32; 3],
+    stop: &[i32; 3],
+    step: &[i32; 3],
+    t_max: &mut [f64; 3],
+    t_delta: &[f64; 3],
+    mask: &S,
+    mut remaining: u64,
+) -> (u64, u64) {
+    let mut here = mask.block_voxels(&block_of(key));
+    if here == 0 {
+        remaining = jump_empty(key, stop, step, t_max, t_delta, mask, remaining);
+        here = mask.block_voxels(&block_of(key));
+    }
+    (remaining, here)
 }
 
 /// Leaves the empty blocks (of `mask`) ahead until an occupied block or the
@@ -381,9 +398,9 @@ pub fn cast_ray(
     last
 }
 
-/// [`cast_ray`] over the voxels of interest only: the same hit, and the
-/// same free voxels except those in `mask`'s empty blocks, which the walk
-/// jumps over (see [`BlockMask`]).
+/// [`cast_ray`] over the voxels of interest only: the same hit, and of the
+/// same free voxels those `mask` holds; its empty blocks are jumped over
+/// (see [`BlockMask`]).
 pub fn cast_ray_masked(
     origin_m: &[f64; 3],
     end_m: &[f64; 3],
@@ -391,12 +408,12 @@ pub fn cast_ray_masked(
     mask: &BlockMask,
     mut on_free: impl FnMut(VoxelKey),
 ) -> Option<VoxelKey> {
-    let visited = walk(origin_m, end_m, voxel_m, mask, |k, remaining| {
+    walk(origin_m, end_m, voxel_m, mask, |k, remaining| {
         if remaining >= 2 {
             on_free(k)
         }
-    });
-    (visited > 0).then(|| voxel_key(end_m, voxel_m)).flatten()
+    })
+    .map(|(_, hit)| hit)
 }
 
 #[cfg(test)]
@@ -497,7 +514,7 @@ mod tests {
     }
 
     /// The masked cast against the full one with its free voxels filtered
-    /// to the mask's occupied blocks: same hit, same frees, same order.
+    /// to the voxels of interest: same hit, same frees, same order.
     fn check_masked(o: [f64; 3], e: [f64; 3], v: f64, occupied: &[[i32; 3]]) {
         let (lo, hi) = ([-200; 3], [200; 3]);
         let mask = BlockMask::new(lo, hi, occupied.iter().copied(), u64::MAX).unwrap();
@@ -517,11 +534,11 @@ mod tests {
     proptest! {
         #![proptest_config(ProptestConfig::with_cases(500))]
         #[test]
-        fn masked_cast_frees_what_the_full_cast_frees_in_occupied_blocks(
+        fn masked_cast_frees_what_the_full_cast_frees_among_the_voxels_of_interest(
             o in prop::array::uniform3(-15.0f64..15.0),
             e in prop::array::uniform3(-15.0f64..15.0),
             v in 0.15f64..1.0,
-            // Occupied blocks: a few near the segment, by its parameter.
+            // Voxels of interest: a few near the segment, by its parameter.
             near in prop::collection::vec((0.0f64..1.0, prop::array::uniform3(-3i32..4)), 0..12),
         ) {
             let occupied: Vec<[i32; 3]> = near
