@@ -151,6 +151,15 @@ impl Box3 {
         x.saturating_mul(y).saturating_mul(z)
     }
 
+    /// The box of packed keys.
+    pub(super) fn of_packed(keys: &[u64]) -> Box3 {
+        let mut b = Box3::EMPTY;
+        for &k in keys {
+            b.add(unpack(k));
+        }
+        b
+    }
+
     /// The box of a keyframe's rays: its sensor and every point.
     pub fn of_rays(origin_m: &[f64; 3], points_m: &[[f64; 3]], voxel_m: f64) -> Box3 {
         let mut b = Box3::EMPTY;
@@ -478,10 +487,7 @@ impl InterestEvidence {
 
     /// Empty evidence on keys already sorted and unique.
     fn on_sorted(keys: Vec<u64>, voxel_m: f64) -> InterestEvidence {
-        let mut bounds = Box3::EMPTY;
-        for &k in &keys {
-            bounds.add(unpack(k));
-        }
+        let bounds = Box3::of_packed(&keys);
         let n = keys.len();
         InterestEvidence {
             voxel_m,

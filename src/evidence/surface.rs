@@ -372,10 +372,7 @@ impl SurfaceShapes {
         }
         let mut index = FxHashMap::with_capacity_and_hasher(keys.len(), Default::default());
         index.extend(keys.iter().enumerate().map(|(i, &k)| (k, i as u32)));
-        let mut bounds = Box3::EMPTY;
-        for &k in &keys {
-            bounds.add(unpack(k));
-        }
+        let bounds = Box3::of_packed(&keys);
         let mask = BlockMask::new(bounds.lo, bounds.hi, keys.iter().map(|&k| unpack(k).0), 1 << 28);
         SurfaceShapes { keys, shapes, index, mask }
     }
