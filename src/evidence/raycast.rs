@@ -200,7 +200,7 @@ impl Skip for BlockMask {
 /// a time and the endpoint's voxel (`None`, visiting nothing, for the rays
 /// [`traverse`] refuses). With a skipping `mask`, only its voxels of interest
 /// are reported, and empty blocks the endpoint is not in are left by
-/// [`jump_empty`] instead of walked. A jump moves each axis at most to the
+/// [`Dda::jump_empty`] instead of walked. A jump moves each axis at most to the
 /// block entered and never past the endpoint's key, so the walk still ends
 /// at the endpoint's voxel after `|Δi| + |Δj| + |Δk|` steps in all.
 fn walk<S: Skip>(
@@ -216,7 +216,7 @@ fn walk<S: Skip>(
     let (Some(start), Some(stop)) = (voxel_key(origin_m, voxel_m), voxel_key(end_m, voxel_m)) else {
         return None;
     };
-    let mut key = start.0;
+    let key = start.0;
     let stop = stop.0;
     let mut step = [0i32; 3];
     // Ray parameter t ∈ [0, 1] at the next boundary crossing along each axis,
@@ -238,133 +238,134 @@ fn walk<S: Skip>(
             t_delta[a] = voxel_m / d.abs();
         }
     }
+    let mut ray = Dda { key, stop, step, t_max, t_delta, remaining };
     let mut visited = 1;
     // The current block's voxels of interest (all, unmasked).
     let mut here = u64::MAX;
     if S::SKIPS {
-        (remaining, here) = enter_block(&mut key, &stop, &step, &mut t_max, &t_delta, mask, remaining);
+        here = ray.enter_block(mask);
     }
-    if !S::SKIPS || here & voxel_bit(&key) != 0 {
-        f(VoxelKey(key), remaining);
+    if !S::SKIPS || here & voxel_bit(&ray.key) != 0 {
+        f(VoxelKey(ray.key), ray.remaining);
     }
-    while remaining > 0 {
+    while ray.remaining > 0 {
         // The earliest crossing among axes that still have to move.
         let mut axis = usize::MAX;
         for a in 0..3 {
-            if key[a] != stop[a] && (axis == usize::MAX || t_max[a] < t_max[axis]) {
+            if ray.key[a] != ray.stop[a] && (axis == usize::MAX || ray.t_max[a] < ray.t_max[axis]) {
                 axis = a;
             }
         }
-        let before = key[axis];
-        key[axis] += step[axis];
-        t_max[axis] += t_delta[axis];
-        remaining -= 1;
+        let before = ray.key[axis];
+        ray.key[axis] += ray.step[axis];
+        ray.t_max[axis] += ray.t_delta[axis];
+        ray.remaining -= 1;
         visited += 1;
         if S::SKIPS {
-            if (key[axis] >> BLOCK_SHIFT) != (before >> BLOCK_SHIFT) {
-                (remaining, here) = enter_block(&mut key, &stop, &step, &mut t_max, &t_delta, mask, remaining);
+            if (ray.key[axis] >> BLOCK_SHIFT) != (before >> BLOCK_SHIFT) {
+                here = ray.enter_block(mask);
             }
-            if here & voxel_bit(&key) == 0 {
+            if here & voxel_bit(&ray.key) == 0 {
                 continue;
             }
         }
-        f(VoxelKey(key), remaining);
+        f(VoxelKey(ray.key), ray.remaining);
     }
     Some((visited, VoxelKey(stop)))
 }
 
-/// On entering the block of `key`: the steps still to go and the voxels of
-/// interest of the block the walk goes on in. An empty block is left by
-/// [`jump_empty`]; the block returned is then 0 only if it is the
-/// endpoint's own, walked but not reported.
-fn enter_block<S: Skip>(
-    key: &mut [i32; 3],
-    stop: &[i32; 3],
-    step: &[i32; 3],
-    t_max: &mut [f64; 3],
-    t_delta: &[f64; 3],
-    mask: &S,
-    mut remaining: u64,
-) -> (u64, u64) {
-    let mut here = mask.block_voxels(&block_of(key));
-    if here == 0 {
-        remaining = jump_empty(key, stop, step, t_max, t_delta, mask, remaining);
-        here = mask.block_voxels(&block_of(key));
-    }
-    (remaining, here)
+/// The state of [`walk`]'s Amanatides-Woo traversal: the current and the
+/// endpoint's voxel, the step per axis, the ray parameter `t ∈ [0, 1]` of
+/// the next boundary crossing per axis and its increment between
+/// crossings, and the steps still to go.
+struct Dda {
+    key: [i32; 3],
+    stop: [i32; 3],
+    step: [i32; 3],
+    t_max: [f64; 3],
+    t_delta: [f64; 3],
+    remaining: u64,
 }
 
-/// Leaves the empty blocks (of `mask`) ahead until an occupied block or the
-/// endpoint's block; returns the steps still to go. See [`walk`].
-///
-/// Between blocks it is the walk one level up: per axis the parameter of
-/// the next block crossing (`t_max` plus the crossings to the block's edge),
-/// advanced by four `t_delta` a block. Where it stops, each other axis
-/// takes the crossings before the entry (counted from `t_max`, clamped to
-/// the block entered and to the endpoint's key).
-fn jump_empty<S: Skip>(
-    key: &mut [i32; 3],
-    stop: &[i32; 3],
-    step: &[i32; 3],
-    t_max: &mut [f64; 3],
-    t_delta: &[f64; 3],
-    mask: &S,
-    remaining: u64,
-) -> u64 {
-    let stop_block = block_of(stop);
-    let mut block = block_of(key);
-    if remaining == 0 || block == stop_block {
-        return remaining;
-    }
-    // Parameter of the crossing out of the current block along each axis.
-    let mut t_block = [f64::INFINITY; 3];
-    for a in 0..3 {
-        if step[a] != 0 {
-            let within = key[a] & EDGE;
-            let n = if step[a] > 0 { EDGE - within } else { within };
-            t_block[a] = t_max[a] + n as f64 * t_delta[a];
+impl Dda {
+    /// On entering the block of `key`: the voxels of interest of the block
+    /// the walk goes on in. An empty block is left by jumping over the
+    /// empty blocks ahead ([`Dda::jump_empty`]); the block returned is
+    /// then 0 only if it is the endpoint's own, walked but not reported.
+    fn enter_block<S: Skip>(&mut self, mask: &S) -> u64 {
+        let here = mask.block_voxels(&block_of(&self.key));
+        if here != 0 {
+            return here;
         }
+        self.jump_empty(mask);
+        mask.block_voxels(&block_of(&self.key))
     }
-    let block_delta = t_delta.map(|d| d * (1 << BLOCK_SHIFT) as f64);
-    let mut t_enter;
-    let mut entered;
-    loop {
-        // Ties to the lower axis, as in the walk.
-        let mut e = usize::MAX;
+
+    /// Leaves the empty blocks (of `mask`) ahead until an occupied block or
+    /// the endpoint's block. See [`walk`].
+    ///
+    /// Between blocks it is the walk one level up: per axis the parameter
+    /// of the next block crossing (`t_max` plus the crossings to the
+    /// block's edge), advanced by four `t_delta` a block. Where it stops,
+    /// each other axis takes the crossings before the entry (counted from
+    /// `t_max`, clamped to the block entered and to the endpoint's key).
+    fn jump_empty<S: Skip>(&mut self, mask: &S) {
+        let Dda { key, stop, step, t_max, t_delta, remaining } = self;
+        let stop_block = block_of(stop);
+        let mut block = block_of(key);
+        if *remaining == 0 || block == stop_block {
+            return;
+        }
+        // Parameter of the crossing out of the current block along each axis.
+        let mut t_block = [f64::INFINITY; 3];
         for a in 0..3 {
-            if block[a] != stop_block[a] && (e == usize::MAX || t_block[a] < t_block[e]) {
-                e = a;
+            if step[a] != 0 {
+                let within = key[a] & EDGE;
+                let n = if step[a] > 0 { EDGE - within } else { within };
+                t_block[a] = t_max[a] + n as f64 * t_delta[a];
             }
         }
-        if e == usize::MAX {
-            return remaining;
+        let block_delta = t_delta.map(|d| d * (1 << BLOCK_SHIFT) as f64);
+        let mut t_enter;
+        let mut entered;
+        loop {
+            // Ties to the lower axis, as in the walk.
+            let mut e = usize::MAX;
+            for a in 0..3 {
+                if block[a] != stop_block[a] && (e == usize::MAX || t_block[a] < t_block[e]) {
+                    e = a;
+                }
+            }
+            if e == usize::MAX {
+                return;
+            }
+            t_enter = t_block[e];
+            entered = e;
+            block[e] += step[e];
+            t_block[e] += block_delta[e];
+            if block == stop_block || !mask.is_empty_block(&block) {
+                break;
+            }
         }
-        t_enter = t_block[e];
-        entered = e;
-        block[e] += step[e];
-        t_block[e] += block_delta[e];
-        if block == stop_block || !mask.is_empty_block(&block) {
-            break;
+        for a in 0..3 {
+            if step[a] == 0 {
+                continue;
+            }
+            let base = block[a] << BLOCK_SHIFT;
+            let target = if a == entered {
+                if step[a] > 0 { base } else { base + EDGE }
+            } else {
+                let c = if t_max[a] < t_enter { ((t_enter - t_max[a]) / t_delta[a]) as i64 + 1 } else { 0 };
+                let k = (key[a] as i64 + step[a] as i64 * c).clamp(base as i64, (base + EDGE) as i64) as i32;
+                // Never past the endpoint's key.
+                if step[a] > 0 { k.min(stop[a]) } else { k.max(stop[a]) }
+            };
+            let n = (target - key[a]).abs();
+            key[a] = target;
+            t_max[a] += n as f64 * t_delta[a];
         }
+        *remaining = (0..3).map(|a| (stop[a] as i64 - key[a] as i64).unsigned_abs()).sum();
     }
-    for a in 0..3 {
-        if step[a] == 0 {
-            continue;
-        }
-        let base = block[a] << BLOCK_SHIFT;
-        let target = if a == entered {
-            if step[a] > 0 { base } else { base + EDGE }
-        } else {
-            let c = if t_max[a] < t_enter { ((t_enter - t_max[a]) / t_delta[a]) as i64 + 1 } else { 0 };
-            let k = (key[a] as i64 + step[a] as i64 * c).clamp(base as i64, (base + EDGE) as i64) as i32;
-            // Never past the endpoint's key.
-            if step[a] > 0 { k.min(stop[a]) } else { k.max(stop[a]) }
-        };
-        let n = (target - key[a]).abs();
-        key[a] = target;
-        t_max[a] += n as f64 * t_delta[a];
-    }
-    (0..3).map(|a| (stop[a] as i64 - key[a] as i64).unsigned_abs()).sum()
 }
 
 /// Casts one ray and applies MATH.md §6's rule, returning the hit voxel.
