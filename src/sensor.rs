@@ -64,6 +64,36 @@ impl SensorModel {
     }
 }
 
+impl SensorModel {
+    /// A spinning sensor's beam elevations (degrees, the order it fires
+    /// them) and columns per revolution; `None` for a forward sensor's
+    /// pattern. The simulator fires these beams.
+    pub fn beams(self) -> Option<(Vec<f64>, usize)> {
+        let uniform =
+            |lo: f64, hi: f64, n: usize| (0..n).map(|i| lo + (hi - lo) * i as f64 / (n - 1) as f64).collect::<Vec<_>>();
+        match self {
+            SensorModel::Os1_64 => Some((uniform(-22.5, 22.5, 64), 1024)),
+            SensorModel::Vlp16 => Some((uniform(-15.0, 15.0, 16), 1800)),
+            SensorModel::Hdl32e => Some((uniform(-30.67, 10.67, 32), 2187)),
+            SensorModel::Hdl64e => {
+                // Upper block: +2° to -8.33° in 1/3° steps; lower block to -24.8°.
+                let mut e = uniform(-8.33, 2.0, 32);
+                e.extend(uniform(-24.8, -8.83, 32));
+                Some((e, 2083))
+            }
+            SensorModel::Avia => None,
+        }
+    }
+
+    /// The widest gap between neighbouring beam elevations of a spinning
+    /// sensor, degrees (2° for a VLP-16, 0.71° for an OS1-64).
+    pub fn beam_spacing_deg(self) -> Option<f64> {
+        let (mut e, _) = self.beams()?;
+        e.sort_by(f64::total_cmp);
+        e.windows(2).map(|w| w[1] - w[0]).reduce(f64::max)
+    }
+}
+
 /// A field of view: a 360° band of elevations, or a forward rectangle.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case")]
@@ -85,5 +115,21 @@ mod tests {
         }
         assert_eq!(SensorModel::parse("Ouster OS1-64"), Some(SensorModel::Os1_64));
         assert_eq!(SensorModel::parse("kinect"), None);
+    }
+
+    #[test]
+    fn beam_spacing_is_the_widest_gap_and_the_beams_fill_the_band() {
+        let close = |a: Option<f64>, b: f64| a.is_some_and(|a| (a - b).abs() < 1e-3);
+        assert!(close(SensorModel::Vlp16.beam_spacing_deg(), 2.0));
+        assert!(close(SensorModel::Os1_64.beam_spacing_deg(), 45.0 / 63.0));
+        assert!(close(SensorModel::Hdl32e.beam_spacing_deg(), 41.34 / 31.0));
+        // The HDL-64E's lower block is the sparser one.
+        assert!(close(SensorModel::Hdl64e.beam_spacing_deg(), (24.8 - 8.83) / 31.0));
+        assert_eq!(SensorModel::Avia.beam_spacing_deg(), None);
+        for m in SensorModel::ALL {
+            let (Some((e, _)), Fov::Band { elev_min_deg, elev_max_deg }) = (m.beams(), m.fov()) else { continue };
+            let (lo, hi) = e.iter().fold((f64::MAX, f64::MIN), |(l, h), &x| (l.min(x), h.max(x)));
+            assert!((lo - elev_min_deg).abs() < 1e-9 && (hi - elev_max_deg).abs() < 1e-9, "{m:?}");
+        }
     }
 }

@@ -13,9 +13,11 @@
 //! sensor's field of view: a spinning sensor's 360° × elevation band
 //! ([`Fov::Band`]) or a forward sensor's rectangle ([`Fov::Rect`]).
 //! A direction counts as **no return** when no point fell in the window of
-//! ± `margin` around it. The margin is wider than the sensor's beam spacing
-//! (2° for a VLP-16), so a window always holds a beam, and a lone beam lost
-//! to dropout is never a hole: its neighbours returned. The Avia's rosette
+//! ± `margin` around it. The window is 1.5 beam spacings tall for a
+//! spinning sensor seam knows (`EvidenceConfig::for_beam_spacing`: ± 1.5°
+//! for a VLP-16's 2° rows, ± 0.54° for an OS1-64's 0.71°; ± 1.5° for an
+//! unknown one), so it always holds a row of beams, and a lone beam lost to
+//! dropout is never a hole: its neighbours returned. The Avia's rosette
 //! covers the ellipse inscribed in its rectangle and leaves gaps up to
 //! about 2.5° wide there in one 0.1 s frame, so a forward sensor's window
 //! is twice the margin and must lie inside the ellipse whole (a test checks

@@ -17,6 +17,7 @@ use crate::evidence::session::{self, KeyframeInput, delta, reproject, reproject_
 use crate::evidence::surface::MapPatch;
 use crate::evidence::{EvidenceModel, SubmapEvidence};
 use crate::geometry::Pose;
+use crate::sensor::SensorModel;
 use crate::store::evidence_files::{
     read_cleaned_map, read_submap_evidence, write_cleaned_map, write_point_labels, write_submap_evidence,
 };
@@ -89,7 +90,13 @@ pub(super) fn evidence(ctx: &mut StepCtx<'_>, step: &'static str, seq: i64) -> R
     drop(map);
     ctx.progress.begin("ray cast", inputs.len() as u64);
     let fov = crate::align::session_fov(&state.row, || scans.first().cloned());
-    let out = session::generate(&inputs, &map_patches, Some(&fov), cfg, |_| ctx.progress.advance(1));
+    // The no-return window follows the sensor's beam spacing where seam
+    // knows its beams.
+    let spacing =
+        state.row.sensor_model.as_deref().and_then(SensorModel::parse).and_then(SensorModel::beam_spacing_deg);
+    let out = session::generate(&inputs, &map_patches, Some(&fov), &cfg.for_beam_spacing(spacing), |_| {
+        ctx.progress.advance(1)
+    });
     ctx.progress.end();
     drop(inputs);
     drop(scans);

@@ -37,24 +37,6 @@ pub(crate) fn spec(model: SensorModel) -> SensorSpec {
     SensorSpec { max_range_m, min_range_m, range_sigma_m, dropout }
 }
 
-/// Elevation table (degrees) and columns per revolution of a spinning sensor.
-fn band(model: SensorModel) -> Option<(Vec<f64>, usize)> {
-    let uniform =
-        |lo: f64, hi: f64, n: usize| (0..n).map(|i| lo + (hi - lo) * i as f64 / (n - 1) as f64).collect::<Vec<_>>();
-    match model {
-        SensorModel::Os1_64 => Some((uniform(-22.5, 22.5, 64), 1024)),
-        SensorModel::Vlp16 => Some((uniform(-15.0, 15.0, 16), 1800)),
-        SensorModel::Hdl32e => Some((uniform(-30.67, 10.67, 32), 2187)),
-        SensorModel::Hdl64e => {
-            // Upper block: +2° to -8.33° in 1/3° steps; lower block to -24.8°.
-            let mut e = uniform(-8.33, 2.0, 32);
-            e.extend(uniform(-24.8, -8.83, 32));
-            Some((e, 2083))
-        }
-        SensorModel::Avia => None,
-    }
-}
-
 fn direction(azimuth_rad: f64, elevation_rad: f64) -> [f64; 3] {
     let (se, ce) = elevation_rad.sin_cos();
     let (sa, ca) = azimuth_rad.sin_cos();
@@ -72,7 +54,7 @@ const AVIA_PRISM_HZ: [f64; 2] = [7294.0 / 60.0, 4664.0 / 60.0];
 /// [0, 1) shifts a spinning sensor's columns by that fraction of a column.
 pub(crate) fn ray_directions(model: SensorModel, time_s: f64, phase: f64) -> Vec<[f64; 3]> {
     let deg = std::f64::consts::PI / 180.0;
-    if let Some((elev, cols)) = band(model) {
+    if let Some((elev, cols)) = model.beams() {
         let elev_rad: Vec<f64> = elev.iter().map(|e| e * deg).collect();
         let mut dirs = Vec::with_capacity(elev.len() * cols);
         for c in 0..cols {
