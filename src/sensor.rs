@@ -62,9 +62,7 @@ impl SensorModel {
             SensorModel::Avia => Fov::Rect { azimuth_deg: 70.4, elevation_deg: 77.2 },
         }
     }
-}
 
-impl SensorModel {
     /// A spinning sensor's beam elevations (degrees, the order it fires
     /// them) and columns per revolution; `None` for a forward sensor's
     /// pattern. The simulator fires these beams.

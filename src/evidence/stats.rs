@@ -332,15 +332,15 @@ impl LogOddsConfig {
 /// A window 1.5 spacings tall always holds a row of beams, and the several
 /// columns of that row in it: a lone beam lost to dropout is no hole.
 ///
-/// Why not one margin for all: a window as wide as a VLP-16's 2° rows
-/// needs spans 1.4 m at 50 m for an OS1-64, whose beams are 0.71° apart, and
-/// any return in it (the crane's new jib a few metres in front of where the
+/// Why not one margin for all: the ± 1.5° window a VLP-16's 2° rows need
+/// spans 2.6 m at 50 m, where an OS1-64's beams are 0.6 m apart, and any
+/// return in it (the crane's new jib a few metres in front of where the
 /// old one was) hides the beams that did go through empty space. Measured
 /// with `bench/change_sites.py` on the demo site (OS1-64, 5 × 150 keyframes,
 /// seed 1), permanent structure static / removed objects' voxels left:
 /// margin 1.5° 99.31 / 17.66 %, 0.75° 99.30 / 15.23 %, 0.5° 99.30 / 14.41 %
 /// (crane-jib leftovers 1,699 → 1,191 → 1,020 voxels). With this rule, the
-/// whole bench (seed 3 but the demo): OS1-64 99.31 / 17.66 → 99.30 / 14.48
+/// whole bench (every site seed 3 but the demo's): OS1-64 99.31 / 17.66 → 99.30 / 14.48
 /// %, HDL-32E (1.5° → 1.0°) 99.42 / 13.07 → 99.38 / 12.90 %, HDL-64E
 /// 99.33 / 8.13 → 99.32 / 8.12 % (it looks no higher than +2°); the VLP-16
 /// and the Avia keep 1.5°.
