@@ -38,7 +38,9 @@ fn setup(tmp: &Path) -> (std::path::PathBuf, Vec<PointLabels>, Store) {
     let want = vec![labels(250, 1), labels(1234, 2)];
     let mut recs = Vec::new();
     for (i, l) in want.iter().enumerate() {
-        recs.push(write_point_labels(&store, &format!("data/point_labels/session-{:04}.parquet", i + 1), l).unwrap());
+        recs.push(
+            write_point_labels(store.root(), &format!("data/point_labels/session-{:04}.parquet", i + 1), l).unwrap(),
+        );
     }
     store
         .transaction(|tx| -> Result<(), StoreError> {

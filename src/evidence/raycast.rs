@@ -104,6 +104,8 @@ pub struct BlockMask {
     /// Occupied blocks before each word of `present`.
     rank: Vec<u32>,
     voxels: Vec<u64>,
+    /// Voxels of interest before each occupied block (see [`Self::rank_of`]).
+    voxel_rank: Vec<u32>,
 }
 
 impl BlockMask {
@@ -127,6 +129,7 @@ impl BlockMask {
             present: vec![0; n.div_ceil(64) as usize],
             rank: Vec::new(),
             voxels: Vec::new(),
+            voxel_rank: Vec::new(),
         };
         let inside = |k: &[i32; 3]| (0..3).all(|a| lo[a] <= k[a] && k[a] <= hi[a]);
         for k in keys.clone().filter(|k| inside(k)) {
@@ -150,7 +153,35 @@ impl BlockMask {
                 m.voxels[slot] |= voxel_bit(&k);
             }
         }
+        let mut total = 0u32;
+        m.voxel_rank = m
+            .voxels
+            .iter()
+            .map(|w| {
+                let r = total;
+                total += w.count_ones();
+                r
+            })
+            .collect();
         Some(m)
+    }
+
+    /// How many voxels of interest there are.
+    pub fn count(&self) -> usize {
+        self.voxel_rank.last().zip(self.voxels.last()).map_or(0, |(r, w)| *r as usize + w.count_ones() as usize)
+    }
+
+    /// The position of voxel `key` among the voxels of interest, in the
+    /// mask's own order (by block, then by bit within the block), `None`
+    /// when it is not one. A dense index in `0..count()` for a table of
+    /// one entry per voxel of interest: a few words of the mask read
+    /// instead of a hash probe.
+    #[inline]
+    pub fn rank_of(&self, key: &[i32; 3]) -> Option<usize> {
+        let slot = self.slot(&block_of(key))?;
+        let w = self.voxels[slot];
+        let bit = voxel_bit(key);
+        (w & bit != 0).then(|| self.voxel_rank[slot] as usize + (w & (bit - 1)).count_ones() as usize)
     }
 
     #[inline]

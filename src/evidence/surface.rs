@@ -50,7 +50,7 @@
 //! rule. Written by hand: it is a few lines of geometry on the grid's own
 //! sorted keys.
 
-use super::grid::{Box3, packed_key, unpack};
+use super::grid::{Box3, KeyIndex, pack, packed_key, unpack};
 use super::raycast::BlockMask;
 use super::stats::EvidenceConfig;
 use crate::geometry::{SYM3_PAIRS, Sym3, sym3_matrix};
@@ -271,14 +271,28 @@ impl VoxelShape {
 /// The shapes of the voxels a session's points occupy, sorted by packed key.
 #[derive(Debug, Clone, Default)]
 pub struct SurfaceShapes {
-    keys: Vec<u64>,
+    /// In the order of `lookup`: the mask's rank order, or ascending keys.
     shapes: Vec<VoxelShape>,
-    /// Packed key → index, for rays (a hash probe is several times faster
-    /// than a binary search over a million keys).
-    index: FxHashMap<u64, u32>,
-    /// The keys as blocks, so a ray probes `index` only at a voxel that has
-    /// a shape (`None`: bounds too large for one; every voxel is probed).
-    mask: Option<BlockMask>,
+    lookup: ShapeLookup,
+}
+
+/// How a voxel finds its shape. Rays ask at every voxel of interest they
+/// cross, so this is on the evidence step's hottest path: on SemanticKITTI
+/// 04 a hash probe into a table of 165,000 shapes was most of the time rays
+/// spent outside the walk, each a cache miss.
+#[derive(Debug, Clone)]
+enum ShapeLookup {
+    /// The keys as a [`BlockMask`]; a shape's index is its key's
+    /// [`BlockMask::rank_of`].
+    Ranked(BlockMask),
+    /// Packed key → index, where the keys' bounds are too large for a mask.
+    Hashed(FxHashMap<u64, u32>),
+}
+
+impl Default for ShapeLookup {
+    fn default() -> Self {
+        ShapeLookup::Hashed(FxHashMap::default())
+    }
 }
 
 impl SurfaceShapes {
@@ -298,6 +312,7 @@ impl SurfaceShapes {
         cfg: &EvidenceConfig,
     ) -> SurfaceShapes {
         let mut moments = vec![Moments::default(); interest.len()];
+        let index = KeyIndex::new(interest, &Box3::of_packed(interest));
         let batch = rayon::current_num_threads().max(1) * 2;
         let mut scans = scans.peekable();
         while scans.peek().is_some() {
@@ -309,7 +324,7 @@ impl SurfaceShapes {
                         .iter()
                         .filter_map(|p| {
                             let k = packed_key(p, voxel_m)?;
-                            let i = interest.binary_search(&k).ok()?;
+                            let i = index.find(interest, k)?;
                             let c = unpack(k).0;
                             Some((i as u32, std::array::from_fn(|a| p[a] - (c[a] as f64 + 0.5) * voxel_m)))
                         })
@@ -329,11 +344,20 @@ impl SurfaceShapes {
                     out
                 })
                 .collect();
-            for part in parts {
-                for (i, m) in part {
-                    moments[i as usize].merge(&m);
+            // Each part is sorted by index: merged range by range in
+            // parallel, parts in keyframe order within each range, so the
+            // sums do not depend on threads.
+            const RANGE: usize = 4096;
+            moments.par_chunks_mut(RANGE).enumerate().for_each(|(c, range)| {
+                let lo = (c * RANGE) as u32;
+                let hi = lo + range.len() as u32;
+                for part in &parts {
+                    let from = part.partition_point(|(i, _)| *i < lo);
+                    for (i, m) in part[from..].iter().take_while(|(i, _)| *i < hi) {
+                        range[(i - lo) as usize].merge(m);
+                    }
                 }
-            }
+            });
         }
         let map_shape = |p: &MapPatch| -> Option<VoxelShape> {
             if p.points < cfg.surface_map_min_points || !p.spread_m2.iter().all(|c| c.is_finite()) {
@@ -348,7 +372,7 @@ impl SurfaceShapes {
         let map = if cfg.map_patches { map } else { &[] };
         let from_map: Vec<(u64, VoxelShape)> = map
             .par_iter()
-            .filter(|p| interest.binary_search(&p.key).is_ok_and(|i| moments[i].n == 0))
+            .filter(|p| index.find(interest, p.key).is_some_and(|i| moments[i].n == 0))
             .filter_map(|p| Some((p.key, map_shape(p)?)))
             .collect();
         let (mut keys, mut shapes): (Vec<u64>, Vec<VoxelShape>) = interest
@@ -370,32 +394,49 @@ impl SurfaceShapes {
             all.dedup_by_key(|(k, _)| *k);
             (keys, shapes) = all.into_iter().unzip();
         }
-        let mut index = FxHashMap::with_capacity_and_hasher(keys.len(), Default::default());
-        index.extend(keys.iter().enumerate().map(|(i, &k)| (k, i as u32)));
         let bounds = Box3::of_packed(&keys);
-        let mask = BlockMask::new(bounds.lo, bounds.hi, keys.iter().map(|&k| unpack(k).0), 1 << 28);
-        SurfaceShapes { keys, shapes, index, mask }
+        match BlockMask::new(bounds.lo, bounds.hi, keys.iter().map(|&k| unpack(k).0), 1 << 28) {
+            Some(mask) => {
+                let mut ranked: Vec<Option<VoxelShape>> = vec![None; keys.len()];
+                for (&k, s) in keys.iter().zip(shapes) {
+                    ranked[mask.rank_of(&unpack(k).0).expect("the mask holds its own keys")] = Some(s);
+                }
+                let shapes = ranked.into_iter().map(|s| s.expect("one shape per key")).collect();
+                SurfaceShapes { shapes, lookup: ShapeLookup::Ranked(mask) }
+            }
+            None => {
+                let mut index = FxHashMap::with_capacity_and_hasher(keys.len(), Default::default());
+                index.extend(keys.iter().enumerate().map(|(i, &k)| (k, i as u32)));
+                SurfaceShapes { shapes, lookup: ShapeLookup::Hashed(index) }
+            }
+        }
     }
 
     pub fn len(&self) -> usize {
-        self.keys.len()
+        self.shapes.len()
     }
 
     pub fn is_empty(&self) -> bool {
-        self.keys.is_empty()
+        self.shapes.is_empty()
     }
 
     /// The shape of the voxel with packed key `key`, if it has one.
     pub fn get(&self, key: u64) -> Option<&VoxelShape> {
-        self.index.get(&key).map(|&i| &self.shapes[i as usize])
+        match &self.lookup {
+            ShapeLookup::Ranked(_) => self.at(&unpack(key).0),
+            ShapeLookup::Hashed(index) => index.get(&key).map(|&i| &self.shapes[i as usize]),
+        }
     }
 
-    /// Whether voxel `k` may have a shape: exact where the keys fit a
-    /// [`BlockMask`], so [`Self::get`]'s hash probe runs only for the ones
-    /// that do.
+    /// The shape of voxel `k`, if it has one ([`Self::get`] by key).
     #[inline]
-    pub(super) fn may_have(&self, k: &[i32; 3]) -> bool {
-        self.mask.as_ref().is_none_or(|m| m.holds(k))
+    pub(super) fn at(&self, k: &[i32; 3]) -> Option<&VoxelShape> {
+        match &self.lookup {
+            ShapeLookup::Ranked(mask) => mask.rank_of(k).map(|i| &self.shapes[i]),
+            ShapeLookup::Hashed(index) => {
+                pack(crate::geometry::VoxelKey(*k)).and_then(|pk| index.get(&pk)).map(|&i| &self.shapes[i as usize])
+            }
+        }
     }
 }
 

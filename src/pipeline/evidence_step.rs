@@ -144,18 +144,30 @@ pub(super) fn evidence(ctx: &mut StepCtx<'_>, step: &'static str, seq: i64) -> R
     let reproject_s = t_re.elapsed().as_secs_f64();
 
     // Publish the files, then record them with the step in one transaction.
-    let mut published: Vec<(FileRecord, Option<SubmapId>, usize)> = Vec::new();
+    // Each file is compressed and synced on one thread, so they are written
+    // side by side (the labels, one row per point, take longest).
     let by_ordinal: HashMap<usize, SubmapId> = ordinal.iter().map(|(id, o)| (*o, *id)).collect();
-    for (o, table) in out.submaps.iter().enumerate() {
-        let rel = format!("data/evidence/s{:04}/m{o:04}_v{version}.parquet", session.0);
-        published.push((write_submap_evidence(ctx.store, &rel, table)?, by_ordinal.get(&o).copied(), table.len()));
-    }
-    for (o, map) in out.cleaned.iter().enumerate() {
-        let rel = format!("data/cleaned/s{:04}/m{o:04}_v{version}.parquet", session.0);
-        published.push((write_cleaned_map(ctx.store, &rel, map)?, by_ordinal.get(&o).copied(), map.len()));
-    }
-    let rel = format!("data/labels/s{:04}_v{version}.parquet", session.0);
-    published.push((write_point_labels(ctx.store, &rel, &out.labels)?, None, out.labels.len()));
+    let root = ctx.store.root();
+    let s = session.0;
+    type Published = (FileRecord, Option<SubmapId>, usize);
+    let write_submaps = || -> Result<Vec<Published>, IngestError> {
+        let evidence = out.submaps.par_iter().enumerate().map(|(o, table)| {
+            let rel = format!("data/evidence/s{s:04}/m{o:04}_v{version}.parquet");
+            Ok((write_submap_evidence(root, &rel, table)?, by_ordinal.get(&o).copied(), table.len()))
+        });
+        let cleaned = out.cleaned.par_iter().enumerate().map(|(o, map)| {
+            let rel = format!("data/cleaned/s{s:04}/m{o:04}_v{version}.parquet");
+            Ok((write_cleaned_map(root, &rel, map)?, by_ordinal.get(&o).copied(), map.len()))
+        });
+        evidence.chain(cleaned).collect()
+    };
+    let write_labels = || -> Result<Published, IngestError> {
+        let rel = format!("data/labels/s{s:04}_v{version}.parquet");
+        Ok((write_point_labels(root, &rel, &out.labels)?, None, out.labels.len()))
+    };
+    let (submap_files, labels_file) = rayon::join(write_submaps, write_labels);
+    let mut published = submap_files?;
+    published.push(labels_file?);
 
     let model = match cfg.model {
         EvidenceModel::Directional => "directional",

@@ -52,10 +52,12 @@ pub struct WrittenFile {
     pub row_count: u64,
 }
 
-/// Writes `batch` as a store file at `rel_path` and returns its record of
-/// `kind`, ready for [`super::insert_file`]. Fault point `<kind>:before_rename`.
-pub fn write_table(store: &Store, rel_path: &str, kind: &str, batch: &RecordBatch) -> Result<FileRecord, StoreError> {
-    let w = write_batch(&store.path_of(rel_path), kind, batch)?;
+/// Writes `batch` as a file at `rel_path` of the store at `root`
+/// ([`Store::root`]: a path, not the store, so that files can be written
+/// from several threads) and returns its record of `kind`, ready for
+/// [`super::insert_file`]. Fault point `<kind>:before_rename`.
+pub fn write_table(root: &Path, rel_path: &str, kind: &str, batch: &RecordBatch) -> Result<FileRecord, StoreError> {
+    let w = write_batch(&root.join(rel_path), kind, batch)?;
     Ok(FileRecord {
         rel_path: rel_path.to_string(),
         kind: kind.to_string(),
@@ -331,22 +333,22 @@ pub fn point_labels_batch(path: &Path, l: &PointLabels) -> Result<RecordBatch, S
 // ---------------------------------------------------------------------------
 // Writers
 
-/// Publishes a submap's evidence at `rel_path` as a file of kind `evidence`.
-pub fn write_submap_evidence(store: &Store, rel_path: &str, ev: &SubmapEvidence) -> Result<FileRecord, StoreError> {
-    let b = submap_evidence_batch(&store.path_of(rel_path), ev)?;
-    write_table(store, rel_path, "evidence", &b)
+/// Publishes a submap's evidence at `rel_path` (of the store at `root`) as a file of kind `evidence`.
+pub fn write_submap_evidence(root: &Path, rel_path: &str, ev: &SubmapEvidence) -> Result<FileRecord, StoreError> {
+    let b = submap_evidence_batch(&root.join(rel_path), ev)?;
+    write_table(root, rel_path, "evidence", &b)
 }
 
-/// Publishes a submap's cleaned map at `rel_path` as a file of kind `cleaned_map`.
-pub fn write_cleaned_map(store: &Store, rel_path: &str, map: &CleanedMap) -> Result<FileRecord, StoreError> {
-    let b = cleaned_map_batch(&store.path_of(rel_path), map)?;
-    write_table(store, rel_path, "cleaned_map", &b)
+/// Publishes a submap's cleaned map at `rel_path` (of the store at `root`) as a file of kind `cleaned_map`.
+pub fn write_cleaned_map(root: &Path, rel_path: &str, map: &CleanedMap) -> Result<FileRecord, StoreError> {
+    let b = cleaned_map_batch(&root.join(rel_path), map)?;
+    write_table(root, rel_path, "cleaned_map", &b)
 }
 
-/// Publishes a session's point labels at `rel_path` as a file of kind `point_labels`.
-pub fn write_point_labels(store: &Store, rel_path: &str, labels: &PointLabels) -> Result<FileRecord, StoreError> {
-    let b = point_labels_batch(&store.path_of(rel_path), labels)?;
-    write_table(store, rel_path, "point_labels", &b)
+/// Publishes a session's point labels at `rel_path` (of the store at `root`) as a file of kind `point_labels`.
+pub fn write_point_labels(root: &Path, rel_path: &str, labels: &PointLabels) -> Result<FileRecord, StoreError> {
+    let b = point_labels_batch(&root.join(rel_path), labels)?;
+    write_table(root, rel_path, "point_labels", &b)
 }
 
 /// Writes point labels to `path` outside any store (`seam export`), with
@@ -631,7 +633,7 @@ mod tests {
         for n in [0, 1, 1000] {
             let ev = evidence(n);
             let rel = format!("data/evidence/e{n}.parquet");
-            let rec = write_submap_evidence(&s, &rel, &ev).unwrap();
+            let rec = write_submap_evidence(s.root(), &rel, &ev).unwrap();
             assert_record(&s, &rec, "evidence", n);
             assert_eq!(read_submap_evidence(&s.path_of(&rel)).unwrap(), ev);
         }
@@ -642,7 +644,7 @@ mod tests {
         // A voxel no point fell in keeps its NaN box.
         let mut ev = evidence(3);
         ev.hit_box_m[1] = crate::evidence::NO_HIT_BOX;
-        write_submap_evidence(&s, "data/evidence/nan.parquet", &ev).unwrap();
+        write_submap_evidence(s.root(), "data/evidence/nan.parquet", &ev).unwrap();
         let back = read_submap_evidence(&s.path_of("data/evidence/nan.parquet")).unwrap();
         assert!(back.hit_box_m[1].iter().all(|v| v.is_nan()));
         assert_eq!(back.hit_box_m[2], ev.hit_box_m[2]);
@@ -655,7 +657,7 @@ mod tests {
         for n in [0, 5, 3000] {
             let m = cleaned(n);
             let rel = format!("data/cleaned/c{n}.parquet");
-            let rec = write_cleaned_map(&s, &rel, &m).unwrap();
+            let rec = write_cleaned_map(s.root(), &rel, &m).unwrap();
             assert_record(&s, &rec, "cleaned_map", n);
             assert_eq!(read_cleaned_map(&s.path_of(&rel)).unwrap(), m);
         }
@@ -674,7 +676,7 @@ mod tests {
             full.columns()[..n].to_vec(),
         )
         .unwrap();
-        write_table(&s, "data/old_ev.parquet", "evidence", &old).unwrap();
+        write_table(s.root(), "data/old_ev.parquet", "evidence", &old).unwrap();
         let back = read_submap_evidence(&s.path_of("data/old_ev.parquet")).unwrap();
         assert_eq!(back.no_return_n, vec![0; 4]);
         assert_eq!(SubmapEvidence { no_return_n: ev.no_return_n.iter().map(|_| 0).collect(), ..ev }, back);
@@ -699,7 +701,7 @@ mod tests {
             ],
         )
         .unwrap();
-        write_table(&s, "data/old.parquet", "cleaned_map", &b).unwrap();
+        write_table(s.root(), "data/old.parquet", "cleaned_map", &b).unwrap();
         let m = read_cleaned_map(&s.path_of("data/old.parquet")).unwrap();
         assert_eq!((m.xyz_m[1], m.points.clone(), m.owner_keyframe.clone()), ([2.0, 0.5, 3.0], vec![4, 7], vec![0, 2]));
         assert_eq!(m.spread_m2.len(), 2);
@@ -721,7 +723,7 @@ mod tests {
             ],
         )
         .unwrap();
-        write_table(&s, "data/part.parquet", "cleaned_map", &b).unwrap();
+        write_table(s.root(), "data/part.parquet", "cleaned_map", &b).unwrap();
         let m = read_cleaned_map(&s.path_of("data/part.parquet")).unwrap();
         assert!(m.spread_m2[0].iter().all(|c| c.is_nan()));
     }
@@ -733,7 +735,7 @@ mod tests {
         for n in [0, 3, 300_000] {
             let l = labels(n);
             let rel = format!("data/labels/l{n}.parquet");
-            let rec = write_point_labels(&s, &rel, &l).unwrap();
+            let rec = write_point_labels(s.root(), &rel, &l).unwrap();
             assert_record(&s, &rec, "point_labels", n);
             assert_eq!(read_point_labels(&s.path_of(&rel)).unwrap(), l);
         }
@@ -758,7 +760,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let s = store(&dir);
         let rel = "data/labels/l.parquet";
-        write_point_labels(&s, rel, &labels(20_000)).unwrap();
+        write_point_labels(s.root(), rel, &labels(20_000)).unwrap();
         let path = s.path_of(rel);
         let bytes = std::fs::read(&path).unwrap();
         let bad = dir.path().join("bad.parquet");
@@ -802,7 +804,7 @@ mod tests {
     fn wrong_file_names_what_is_wrong() {
         let dir = tempfile::tempdir().unwrap();
         let s = store(&dir);
-        write_cleaned_map(&s, "data/c.parquet", &cleaned(4)).unwrap();
+        write_cleaned_map(s.root(), "data/c.parquet", &cleaned(4)).unwrap();
         let err = read_point_labels(&s.path_of("data/c.parquet")).unwrap_err().to_string();
         assert!(err.contains("no column \"keyframe\"") && err.contains("c.parquet"), "{err}");
 
@@ -818,7 +820,7 @@ mod tests {
             vec![f32_col([1.0]), i32_col([2]), Arc::new(BooleanArray::from(vec![true])), f32_col([0.5])],
         )
         .unwrap();
-        write_table(&s, "data/t.parquet", "point_labels", &b).unwrap();
+        write_table(s.root(), "data/t.parquet", "point_labels", &b).unwrap();
         let err = read_point_labels(&s.path_of("data/t.parquet")).unwrap_err().to_string();
         assert!(err.contains("column \"keyframe\" is Float32, expected Int32"), "{err}");
 
@@ -829,19 +831,19 @@ mod tests {
             vec![f32_col([0.0]), f32_col([0.0]), f32_col([0.0]), f32_col([0.5]), i32_col([-3]), i32_col([0])],
         )
         .unwrap();
-        write_table(&s, "data/neg.parquet", "cleaned_map", &b).unwrap();
+        write_table(s.root(), "data/neg.parquet", "cleaned_map", &b).unwrap();
         let err = read_cleaned_map(&s.path_of("data/neg.parquet")).unwrap_err().to_string();
         assert!(err.contains("column \"points\" has negative value -3"), "{err}");
         let mut m = cleaned(2);
         m.points[1] = u32::MAX;
-        let err = write_cleaned_map(&s, "data/big.parquet", &m).unwrap_err().to_string();
+        let err = write_cleaned_map(s.root(), "data/big.parquet", &m).unwrap_err().to_string();
         assert!(err.contains("column points: value 4294967295 in row 1 does not fit int32"), "{err}");
         assert!(!s.path_of("data/big.parquet").exists());
 
         // Columns of different lengths are refused before anything is written.
         let mut l = labels(3);
         l.dynamic.pop();
-        let err = write_point_labels(&s, "data/l.parquet", &l).unwrap_err().to_string();
+        let err = write_point_labels(s.root(), "data/l.parquet", &l).unwrap_err().to_string();
         assert!(err.contains("dynamic 2"), "{err}");
         assert!(!s.path_of("data/l.parquet").exists());
     }
@@ -856,7 +858,7 @@ mod tests {
         fields.insert(0, field("extra", DataType::Int32));
         cols.insert(0, i32_col(0..10));
         let b = RecordBatch::try_new(Arc::new(Schema::new(fields)), cols).unwrap();
-        let rec = write_table(&s, "data/labels/x.parquet", "point_labels", &b).unwrap();
+        let rec = write_table(s.root(), "data/labels/x.parquet", "point_labels", &b).unwrap();
         assert_eq!(read_point_labels(&s.path_of("data/labels/x.parquet")).unwrap(), l);
 
         let root = s.root().to_path_buf();
