@@ -23,7 +23,9 @@
 //! can be turned by any yaw). The submap-frame coordinates of a row are
 //! `A_gen⁻¹ · x`, with `A_gen` from the stored graph version.
 
-use super::grid::{Box3, InterestEvidence, RayStats, Row, bit_set, pack, packed_key, row_of, unpack};
+use super::grid::{
+    Box3, InterestEvidence, RayStats, Row, add_points_by_row, bit_set, pack, packed_key, row_of, unpack,
+};
 use super::ground::GroundLevel;
 use super::grow::keyframe_dynamic;
 use super::no_return::{NoReturn, NoReturnImage};
@@ -255,11 +257,12 @@ pub fn generate(
         verdicts.push(this);
         rest = more;
     }
+    // One submap at a time, each on every thread.
     let cleaned: Vec<CleanedMap> = (0..n_submaps)
-        .into_par_iter()
         .map(|s| {
-            let of_submap = keyframes.iter().zip(verdicts.iter().copied()).filter(|(k, _)| k.submap == s);
-            cleaned_map(of_submap, &session, &eps)
+            let of_submap: Vec<(&KeyframeInput<'_>, &[bool])> =
+                keyframes.iter().zip(verdicts.iter().copied()).filter(|(k, _)| k.submap == s).collect();
+            cleaned_map(&of_submap, &submap_box[s], &session, &eps)
         })
         .collect();
     stats.cleaned_voxels = cleaned.iter().map(CleanedMap::len).sum();
@@ -372,52 +375,64 @@ fn label_points(
 }
 
 /// The static points of a submap's keyframes (each with its points'
-/// verdicts), one centroid per voxel.
-fn cleaned_map<'a>(
-    keyframes: impl Iterator<Item = (&'a KeyframeInput<'a>, &'a [bool])>,
+/// verdicts), one centroid per voxel. `b` holds the keyframes' points (the
+/// submap's box of rays), so their rows lie in its x range of `session`'s
+/// keys, and accumulators are kept for that range only.
+fn cleaned_map(
+    keyframes: &[(&KeyframeInput<'_>, &[bool])],
+    b: &Box3,
     session: &InterestEvidence,
     eps: &[f32],
 ) -> CleanedMap {
+    #[derive(Clone, Default)]
     struct Acc {
         /// The points, as offsets from the voxel centre.
         moments: Moments,
-        eps: f32,
+        /// The keyframe adding points now and how many it added, and the
+        /// keyframe that added the most (the first of equals).
         cur: (u32, u32),
         best: (u32, u32),
     }
     let v = session.voxel_m;
-    let mut voxels: FxHashMap<u64, Acc> = FxHashMap::default();
-    for (kf, dynamic) in keyframes {
-        for (p, _) in world_points(kf).iter().zip(dynamic).filter(|(_, d)| !**d) {
-            let Some(k) = packed_key(p, v) else { continue };
-            let Some(i) = session.find(k) else { continue };
-            let a = voxels.entry(k).or_insert(Acc {
-                moments: Moments::default(),
-                eps: eps[i],
-                cur: (kf.index, 0),
-                best: (0, 0),
-            });
-            let c = unpack(k).center_m(v);
-            a.moments.add([p[0] - c[0], p[1] - c[1], p[2] - c[2]]);
+    let (lo, hi) = session.x_range(b);
+    let keys = &session.keys()[lo..hi];
+    let mut acc = vec![Acc::default(); keys.len()];
+    add_points_by_row(
+        &mut acc,
+        keyframes.iter(),
+        |(kf, dynamic)| {
+            world_points(kf)
+                .iter()
+                .zip(dynamic.iter())
+                .filter(|(_, d)| !**d)
+                .filter_map(|(p, _)| {
+                    let k = packed_key(p, v)?;
+                    let i = session.find(k).filter(|i| (lo..hi).contains(i))?;
+                    let c = unpack(k).center_m(v);
+                    Some(((i - lo) as u32, [p[0] - c[0], p[1] - c[1], p[2] - c[2]]))
+                })
+                .collect()
+        },
+        |a, k, d| {
             // Points come keyframe by keyframe: count the current run.
-            if a.cur.0 != kf.index {
-                a.cur = (kf.index, 0);
+            let index = keyframes[k].0.index;
+            if a.moments.count() == 0 || a.cur.0 != index {
+                a.cur = (index, 0);
             }
+            a.moments.add(d);
             a.cur.1 += 1;
             if a.cur.1 > a.best.1 {
                 a.best = a.cur;
             }
-        }
-    }
-    let mut rows: Vec<(u64, Acc)> = voxels.into_iter().collect();
-    rows.sort_unstable_by_key(|(k, _)| *k);
+        },
+    );
     let mut m = CleanedMap::default();
-    for (k, a) in rows {
+    for ((j, a), &k) in acc.iter().enumerate().zip(keys).filter(|((_, a), _)| a.moments.count() > 0) {
         let (mean, spread) = a.moments.mean_and_spread();
         let c = unpack(k).center_m(v);
         m.xyz_m.push([0, 1, 2].map(|i| (c[i] + mean[i]) as f32));
         m.spread_m2.push(spread.map(|x| x as f32));
-        m.eps_l.push(a.eps);
+        m.eps_l.push(eps[lo + j]);
         m.points.push(a.moments.count());
         m.owner_keyframe.push(a.best.0);
     }

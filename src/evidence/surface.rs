@@ -50,7 +50,7 @@
 //! rule. Written by hand: it is a few lines of geometry on the grid's own
 //! sorted keys.
 
-use super::grid::{Box3, KeyIndex, pack, packed_key, unpack};
+use super::grid::{Box3, KeyIndex, add_points_by_row, pack, packed_key, unpack};
 use super::raycast::BlockMask;
 use super::stats::EvidenceConfig;
 use crate::geometry::{SYM3_PAIRS, Sym3, sym3_matrix};
@@ -76,17 +76,6 @@ impl Moments {
         }
         let [x, y, z] = d;
         for (m, p) in self.ss.iter_mut().zip([x * x, x * y, x * z, y * y, y * z, z * z]) {
-            *m += p;
-        }
-    }
-
-    fn merge(&mut self, o: &Moments) {
-        self.keyframes += o.keyframes;
-        self.n += o.n;
-        for a in 0..3 {
-            self.s[a] += o.s[a];
-        }
-        for (m, p) in self.ss.iter_mut().zip(o.ss) {
             *m += p;
         }
     }
@@ -311,54 +300,31 @@ impl SurfaceShapes {
         map: &[MapPatch],
         cfg: &EvidenceConfig,
     ) -> SurfaceShapes {
-        let mut moments = vec![Moments::default(); interest.len()];
         let index = KeyIndex::new(interest, &Box3::of_packed(interest));
-        let batch = rayon::current_num_threads().max(1) * 2;
-        let mut scans = scans.peekable();
-        while scans.peek().is_some() {
-            let chunk: Vec<Vec<[f64; 3]>> = scans.by_ref().take(batch).collect();
-            let parts: Vec<Vec<(u32, Moments)>> = chunk
-                .par_iter()
-                .map(|pts| {
-                    let mut found: Vec<(u32, [f64; 3])> = pts
-                        .iter()
-                        .filter_map(|p| {
-                            let k = packed_key(p, voxel_m)?;
-                            let i = index.find(interest, k)?;
-                            let c = unpack(k).0;
-                            Some((i as u32, std::array::from_fn(|a| p[a] - (c[a] as f64 + 0.5) * voxel_m)))
-                        })
-                        .collect();
-                    found.sort_unstable_by_key(|f| f.0);
-                    let mut out: Vec<(u32, Moments)> = Vec::new();
-                    for (i, d) in found {
-                        match out.last_mut() {
-                            Some((j, m)) if *j == i => m.add(d),
-                            _ => {
-                                let mut m = Moments { keyframes: 1, ..Default::default() };
-                                m.add(d);
-                                out.push((i, m));
-                            }
-                        }
-                    }
-                    out
-                })
-                .collect();
-            // Each part is sorted by index: merged range by range in
-            // parallel, parts in keyframe order within each range, so the
-            // sums do not depend on threads.
-            const RANGE: usize = 4096;
-            moments.par_chunks_mut(RANGE).enumerate().for_each(|(c, range)| {
-                let lo = (c * RANGE) as u32;
-                let hi = lo + range.len() as u32;
-                for part in &parts {
-                    let from = part.partition_point(|(i, _)| *i < lo);
-                    for (i, m) in part[from..].iter().take_while(|(i, _)| *i < hi) {
-                        range[(i - lo) as usize].merge(m);
-                    }
+        // Per voxel, its moments and the last keyframe (+1) that added to them.
+        let mut acc: Vec<(Moments, u32)> = vec![(Moments::default(), 0); interest.len()];
+        add_points_by_row(
+            &mut acc,
+            scans,
+            |pts: Vec<[f64; 3]>| {
+                pts.iter()
+                    .filter_map(|p| {
+                        let key = packed_key(p, voxel_m)?;
+                        let i = index.find(interest, key)?;
+                        let c = unpack(key).0;
+                        Some((i as u32, std::array::from_fn(|a| p[a] - (c[a] as f64 + 0.5) * voxel_m)))
+                    })
+                    .collect()
+            },
+            |(m, last), k, d| {
+                if *last != k as u32 + 1 {
+                    *last = k as u32 + 1;
+                    m.keyframes += 1;
                 }
-            });
-        }
+                m.add(d);
+            },
+        );
+        let moments: Vec<Moments> = acc.into_iter().map(|(m, _)| m).collect();
         let map_shape = |p: &MapPatch| -> Option<VoxelShape> {
             if p.points < cfg.surface_map_min_points || !p.spread_m2.iter().all(|c| c.is_finite()) {
                 return None;
