@@ -212,7 +212,6 @@ pub fn generate(
                 .unzip()
         };
         let mut rays = RayStats::default();
-        let mut boxes = vec![EMPTY_BOX; sub.len()];
         for kf in keyframes.iter().filter(|k| k.submap == s) {
             let pts = world_points(kf);
             let image = no_return_fov.and_then(|f| NoReturnImage::build(kf.points, f, cfg.no_return_margin_deg));
@@ -225,12 +224,12 @@ pub fn generate(
                 min_elevation_deg: cfg.no_return_min_elevation_deg,
             });
             rays += sub.add_keyframe_seeing(&origin(kf), &pts, kf.index, cfg, shapes.as_ref(), no_return.as_ref());
-            grow_hit_boxes(&sub, &pts, &mut boxes);
             done += 1;
             progress(done);
         }
         stats.skipped_rays += rays.skipped_rays;
         stats.no_return_voxels += rays.no_return_voxels;
+        let mut boxes = hit_boxes(&sub, keyframes.iter().filter(|k| k.submap == s));
         for b in &mut boxes {
             if b[0] > b[3] {
                 *b = NO_HIT_BOX;
@@ -282,30 +281,39 @@ fn occupied_rows(session: &InterestEvidence, per_kf: &[(Vec<u64>, Box3)]) -> Vec
     bits.into_iter().map(AtomicU64::into_inner).collect()
 }
 
-/// An empty box for [`grow_hit_boxes`]: every `lo` above every `hi`.
+/// An empty box for [`hit_boxes`]: every `lo` above every `hi`.
 const EMPTY_BOX: [f32; 6] =
     [f32::INFINITY, f32::INFINITY, f32::INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY];
 
-/// Grows each row's box of points (offsets from the voxel's lower corner,
-/// see [`SubmapEvidence::hit_box_m`]) by one keyframe's world points.
-fn grow_hit_boxes(sub: &InterestEvidence, points_m: &[[f64; 3]], boxes: &mut [[f32; 6]]) {
+/// Each row's box of the points of `keyframes` (offsets from the voxel's
+/// lower corner, see [`SubmapEvidence::hit_box_m`]); [`EMPTY_BOX`] for a
+/// row none of them falls in.
+fn hit_boxes<'a>(sub: &InterestEvidence, keyframes: impl Iterator<Item = &'a KeyframeInput<'a>>) -> Vec<[f32; 6]> {
     let v = sub.voxel_m;
-    let found: Vec<(u32, [f32; 3])> = points_m
-        .par_iter()
-        .filter_map(|p| {
-            let k = packed_key(p, v)?;
-            let i = sub.find(k)?;
-            let c = unpack(k).0;
-            Some((i as u32, [0, 1, 2].map(|a| (p[a] - c[a] as f64 * v) as f32)))
-        })
-        .collect();
-    for (i, o) in found {
-        let b = &mut boxes[i as usize];
-        for a in 0..3 {
-            b[a] = b[a].min(o[a]);
-            b[a + 3] = b[a + 3].max(o[a]);
-        }
-    }
+    let mut boxes = vec![EMPTY_BOX; sub.len()];
+    add_points_by_row(
+        &mut boxes,
+        keyframes,
+        |kf| {
+            world_points(kf)
+                .iter()
+                .filter_map(|p| {
+                    let k = packed_key(p, v)?;
+                    let i = sub.find(k)?;
+                    let c = unpack(k).0;
+                    Some((i as u32, [0, 1, 2].map(|a| p[a] - c[a] as f64 * v)))
+                })
+                .collect()
+        },
+        |b, _, o| {
+            for a in 0..3 {
+                let o = o[a] as f32;
+                b[a] = b[a].min(o);
+                b[a + 3] = b[a + 3].max(o);
+            }
+        },
+    );
+    boxes
 }
 
 /// DOR's verdict per voxel: ε_l > τ_dyn, and with `static_neighbour_veto`
