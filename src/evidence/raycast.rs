@@ -137,32 +137,15 @@ impl BlockMask {
                 m.present[(i / 64) as usize] |= 1 << (i % 64);
             }
         }
-        let mut total = 0u32;
-        m.rank = m
-            .present
-            .iter()
-            .map(|w| {
-                let r = total;
-                total += w.count_ones();
-                r
-            })
-            .collect();
-        m.voxels = vec![0; total as usize];
+        let (rank, blocks) = bits_before(&m.present);
+        m.rank = rank;
+        m.voxels = vec![0; blocks as usize];
         for k in keys.filter(|k| inside(k)) {
             if let Some(slot) = m.slot(&block_of(&k)) {
                 m.voxels[slot] |= voxel_bit(&k);
             }
         }
-        let mut total = 0u32;
-        m.voxel_rank = m
-            .voxels
-            .iter()
-            .map(|w| {
-                let r = total;
-                total += w.count_ones();
-                r
-            })
-            .collect();
+        m.voxel_rank = bits_before(&m.voxels).0;
         Some(m)
     }
 
@@ -211,6 +194,20 @@ impl BlockMask {
     pub fn holds(&self, key: &[i32; 3]) -> bool {
         self.block_voxels(&block_of(key)) & voxel_bit(key) != 0
     }
+}
+
+/// Per word, the set bits of the words before it; and the set bits of all.
+fn bits_before(words: &[u64]) -> (Vec<u32>, u32) {
+    let mut total = 0u32;
+    let before = words
+        .iter()
+        .map(|w| {
+            let r = total;
+            total += w.count_ones();
+            r
+        })
+        .collect();
+    (before, total)
 }
 
 impl Skip for BlockMask {
