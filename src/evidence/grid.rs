@@ -111,6 +111,11 @@ impl Box3 {
         }
     }
 
+    /// Every voxel whose x lies in `x0..=x1`.
+    pub fn x_slab(x0: i32, x1: i32) -> Box3 {
+        Box3 { lo: [x0, i32::MIN, i32::MIN], hi: [x1, i32::MAX, i32::MAX] }
+    }
+
     pub fn union(&self, o: &Box3) -> Box3 {
         Box3 { lo: [0, 1, 2].map(|a| self.lo[a].min(o.lo[a])), hi: [0, 1, 2].map(|a| self.hi[a].max(o.hi[a])) }
     }

@@ -125,10 +125,18 @@ pub fn generate(
         })
         .collect();
     let no_return_fov = fov.filter(|_| cfg.no_return_range_m > 0.0 && !map.is_empty());
+    // Per submap, the box of its rays (and of the map voxels its no-return
+    // beams may free), and the slab of x its points span (packed keys sort
+    // by x first).
     let mut submap_box = vec![Box3::EMPTY; n_submaps];
+    let mut points_x = vec![Box3::EMPTY; n_submaps];
     let mut keys: Vec<u64> = map.iter().map(|p| p.key).collect();
     for (kf, (k, b)) in keyframes.iter().zip(&per_kf) {
         submap_box[kf.submap] = submap_box[kf.submap].union(b);
+        if let (Some(&first), Some(&last)) = (k.first(), k.last()) {
+            let slab = Box3::x_slab(unpack(first).0[0], unpack(last).0[0]);
+            points_x[kf.submap] = points_x[kf.submap].union(&slab);
+        }
         if no_return_fov.is_some() {
             // The map voxels this keyframe's no-return beams may free.
             let around = Box3::within_range(&origin(kf), cfg.no_return_range_m, v);
@@ -261,7 +269,7 @@ pub fn generate(
         .map(|s| {
             let of_submap: Vec<(&KeyframeInput<'_>, &[bool])> =
                 keyframes.iter().zip(verdicts.iter().copied()).filter(|(k, _)| k.submap == s).collect();
-            cleaned_map(&of_submap, &submap_box[s], &session, &eps)
+            cleaned_map(&of_submap, &points_x[s], &session, &eps)
         })
         .collect();
     stats.cleaned_voxels = cleaned.iter().map(CleanedMap::len).sum();
@@ -383,9 +391,9 @@ fn label_points(
 }
 
 /// The static points of a submap's keyframes (each with its points'
-/// verdicts), one centroid per voxel. `b` holds the keyframes' points (the
-/// submap's box of rays), so their rows lie in its x range of `session`'s
-/// keys, and accumulators are kept for that range only.
+/// verdicts), one centroid per voxel. `b` holds the keyframes' points, so
+/// their rows lie in its x range of `session`'s keys, and accumulators are
+/// kept for that range only.
 fn cleaned_map(
     keyframes: &[(&KeyframeInput<'_>, &[bool])],
     b: &Box3,

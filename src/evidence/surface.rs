@@ -257,7 +257,8 @@ impl VoxelShape {
     }
 }
 
-/// The shapes of the voxels a session's points occupy, sorted by packed key.
+/// The shapes of the voxels a session's points occupy, found by voxel key
+/// ([`Self::at`], [`Self::get`]).
 #[derive(Debug, Clone, Default)]
 pub struct SurfaceShapes {
     /// In the order of `lookup`: the mask's rank order, or ascending keys.
