@@ -509,7 +509,7 @@ pub(super) fn add_points_by_row<T: Send, K: Send>(
 /// million keys takes 18 probes, the last of them cache misses; on a
 /// simulated HDL-64E session the lookups were a third of the evidence
 /// step.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub struct KeyIndex {
     mask: Option<BlockMask>,
     /// The index of each key, in the mask's rank order.
@@ -551,6 +551,15 @@ impl KeyIndex {
         match &self.mask {
             Some(mask) => mask.rank_of(&unpack(key).0).map(|r| self.index_of_rank[r] as usize),
             None => keys.binary_search(&key).ok(),
+        }
+    }
+
+    /// [`Self::find`] by voxel key (no packing on the mask's path).
+    #[inline]
+    pub fn find_voxel(&self, keys: &[u64], k: &[i32; 3]) -> Option<usize> {
+        match &self.mask {
+            Some(mask) => mask.rank_of(k).map(|r| self.index_of_rank[r] as usize),
+            None => pack(VoxelKey(*k)).and_then(|key| keys.binary_search(&key).ok()),
         }
     }
 }
@@ -1100,8 +1109,10 @@ mod tests {
                 assert_eq!(index.find(set, k), Some(i));
             }
             for _ in 0..3000 {
-                let k = pack(VoxelKey(std::array::from_fn(|_| rng.random_range(-20..20)))).unwrap();
-                assert_eq!(index.find(set, k), set.binary_search(&k).ok(), "{:?}", unpack(k));
+                let v = VoxelKey(std::array::from_fn(|_| rng.random_range(-20..20)));
+                let k = pack(v).unwrap();
+                assert_eq!(index.find(set, k), set.binary_search(&k).ok(), "{v:?}");
+                assert_eq!(index.find_voxel(set, &v.0), index.find(set, k), "{v:?}");
             }
         }
         assert!(KeyIndex::new(&[], &Box3::EMPTY).find(&[], keys[0]).is_none());

@@ -50,13 +50,11 @@
 //! rule. Written by hand: it is a few lines of geometry on the grid's own
 //! sorted keys.
 
-use super::grid::{Box3, KeyIndex, add_points_by_row, pack, packed_key, unpack};
-use super::raycast::BlockMask;
+use super::grid::{Box3, KeyIndex, add_points_by_row, packed_key, unpack};
 use super::stats::EvidenceConfig;
 use crate::geometry::{SYM3_PAIRS, Sym3, sym3_matrix};
 use nalgebra::{SymmetricEigen, Vector3};
 use rayon::prelude::*;
-use rustc_hash::FxHashMap;
 
 /// Sums of one voxel's points, as offsets from the voxel centre.
 #[derive(Debug, Clone, Copy, Default)]
@@ -261,28 +259,14 @@ impl VoxelShape {
 /// ([`Self::at`], [`Self::get`]).
 #[derive(Debug, Clone, Default)]
 pub struct SurfaceShapes {
-    /// In the order of `lookup`: the mask's rank order, or ascending keys.
+    /// Sorted packed keys, a shape each, and the index rays find them by.
+    keys: Vec<u64>,
     shapes: Vec<VoxelShape>,
-    lookup: ShapeLookup,
-}
-
-/// How a voxel finds its shape. Rays ask at every voxel of interest they
-/// cross, so this is on the evidence step's hottest path: on SemanticKITTI
-/// 04 a hash probe into a table of 165,000 shapes was most of the time rays
-/// spent outside the walk, each a cache miss.
-#[derive(Debug, Clone)]
-enum ShapeLookup {
-    /// The keys as a [`BlockMask`]; a shape's index is its key's
-    /// [`BlockMask::rank_of`].
-    Ranked(BlockMask),
-    /// Packed key → index, where the keys' bounds are too large for a mask.
-    Hashed(FxHashMap<u64, u32>),
-}
-
-impl Default for ShapeLookup {
-    fn default() -> Self {
-        ShapeLookup::Hashed(FxHashMap::default())
-    }
+    /// Rays ask at every voxel of interest they cross, so this is on the
+    /// evidence step's hottest path: on SemanticKITTI 04 a hash probe into
+    /// a table of 165,000 shapes was most of the time rays spent outside
+    /// the walk, each a cache miss. The mask's rank is not.
+    index: KeyIndex,
 }
 
 impl SurfaceShapes {
@@ -361,22 +345,8 @@ impl SurfaceShapes {
             all.dedup_by_key(|(k, _)| *k);
             (keys, shapes) = all.into_iter().unzip();
         }
-        let bounds = Box3::of_packed(&keys);
-        match BlockMask::new(bounds.lo, bounds.hi, keys.iter().map(|&k| unpack(k).0), 1 << 28) {
-            Some(mask) => {
-                let mut ranked: Vec<Option<VoxelShape>> = vec![None; keys.len()];
-                for (&k, s) in keys.iter().zip(shapes) {
-                    ranked[mask.rank_of(&unpack(k).0).expect("the mask holds its own keys")] = Some(s);
-                }
-                let shapes = ranked.into_iter().map(|s| s.expect("one shape per key")).collect();
-                SurfaceShapes { shapes, lookup: ShapeLookup::Ranked(mask) }
-            }
-            None => {
-                let mut index = FxHashMap::with_capacity_and_hasher(keys.len(), Default::default());
-                index.extend(keys.iter().enumerate().map(|(i, &k)| (k, i as u32)));
-                SurfaceShapes { shapes, lookup: ShapeLookup::Hashed(index) }
-            }
-        }
+        let index = KeyIndex::new(&keys, &Box3::of_packed(&keys));
+        SurfaceShapes { keys, shapes, index }
     }
 
     pub fn len(&self) -> usize {
@@ -389,21 +359,13 @@ impl SurfaceShapes {
 
     /// The shape of the voxel with packed key `key`, if it has one.
     pub fn get(&self, key: u64) -> Option<&VoxelShape> {
-        match &self.lookup {
-            ShapeLookup::Ranked(_) => self.at(&unpack(key).0),
-            ShapeLookup::Hashed(index) => index.get(&key).map(|&i| &self.shapes[i as usize]),
-        }
+        self.index.find(&self.keys, key).map(|i| &self.shapes[i])
     }
 
-    /// The shape of voxel `k`, if it has one ([`Self::get`] by key).
+    /// The shape of voxel `k`, if it has one ([`Self::get`] by voxel key).
     #[inline]
     pub(super) fn at(&self, k: &[i32; 3]) -> Option<&VoxelShape> {
-        match &self.lookup {
-            ShapeLookup::Ranked(mask) => mask.rank_of(k).map(|i| &self.shapes[i]),
-            ShapeLookup::Hashed(index) => {
-                pack(crate::geometry::VoxelKey(*k)).and_then(|pk| index.get(&pk)).map(|&i| &self.shapes[i as usize])
-            }
-        }
+        self.index.find_voxel(&self.keys, k).map(|i| &self.shapes[i])
     }
 }
 
