@@ -40,8 +40,12 @@ Per dataset:
    against the same truth, positions and voxels as seam's own labels.
 
 Speed: points/s is the session's points over seam's `evidence` step wall
-time (`evidence_s` of `seam eval dor`: ray casting, DOR, its files) and over
-DUFOMap's run + propagate + segment wall time. Both get `--threads` threads
+time (`evidence_s` of `seam eval dor`: reading the scans, ray casting, DOR,
+writing its files) and over DUFOMap's run + propagate + segment wall time,
+which has the scans preloaded and writes nothing. "mem pts/s" puts seam on
+DUFOMap's footing: the same step without reading the scans and writing
+files (`in_memory_s` of `seam eval dor`, the step log's `generate_s`: ray
+casting, evidence, DOR and the cleaned map, all in memory). Both get `--threads` threads
 (default 2, this machine's cores): DUFOMap's `num_threads`, and seam's rayon
 pool through RAYON_NUM_THREADS (0: each picks all cores). The seam binary is
 copied into the work folder first, so a concurrent `cargo build` cannot swap
@@ -314,8 +318,11 @@ def dataset_rows(args, seam, name, dir_, work, eval_ok, variants):
             row["error"] = f"the store's DOR model is {r.get('model')!r}, expected {model!r}"
             return row
         t = r.get("evidence_s")  # the evidence step's wall time; points/s over it
+        m = r.get("in_memory_s")  # the same step without reading scans and writing files
         row.update(scores=r["scores"], model=r["model"], time_s=t, eval=r,
-                   points_per_s=r["points"] / t if t else None, other_busy_cores=busy.get(method))
+                   points_per_s=r["points"] / t if t else None,
+                   in_memory_s=m, in_memory_points_per_s=r["points"] / m if m else None,
+                   other_busy_cores=busy.get(method))
         return row
 
     out["rows"].append(seam_row("seam", stores / "seam.seam", None, "directional"))
@@ -372,7 +379,8 @@ def pct(x):
 
 
 def table(results, threads):
-    head = ["dataset", "method", "PR%", "RR%", "F1%", "prec%", "vPR%", "vRR%", "vF1%", "vprec%", "points/s", "time s"]
+    head = ["dataset", "method", "PR%", "RR%", "F1%", "prec%", "vPR%", "vRR%", "vF1%", "vprec%", "points/s", "time s",
+            "mem pts/s"]
     rows = []
     notes = []
     checks = []  # (dataset / method, max |Δrate|, same counts)
@@ -382,15 +390,17 @@ def table(results, threads):
             s = r.get("scores")
             tag = " (py)" if r.get("source") == "python selfcheck" else ""
             if s is None:
-                rows.append([d["dataset"], r["method"]] + ["n/a"] * 8 + ["-", "-"])
+                rows.append([d["dataset"], r["method"]] + ["n/a"] * 8 + ["-", "-", "-"])
                 if r.get("skipped"):
-                    rows[-1][-2:] = ["skipped", "-"]
+                    rows[-1][-3:] = ["skipped", "-", "-"]
                 if r.get("error"):
                     err = "\n      ".join(r["error"].splitlines())
                     notes.append(f"{d['dataset']} / {r['method']}:\n      {err}")
                 continue
             p, v = s["point"], s["voxel"]
             pps = r.get("points_per_s")
+            # DUFOMap's own time is in memory already (scans preloaded).
+            mem = r.get("in_memory_points_per_s", pps)
             t = r.get("time_s")
             busy = r.get("other_busy_cores")
             star = "*" if busy is not None and busy > BUSY_FLAG else ""
@@ -400,6 +410,7 @@ def table(results, threads):
                 pct(p["pr"]), pct(p["rr"]), pct(p["f1"]), pct(p["precision_of_removal"]),
                 pct(v["pr"]), pct(v["rr"]), pct(v["f1"]), pct(v["precision_of_removal"]),
                 (f"{pps:,.0f}" if pps else "-") + star, f"{t:.2f}" if t is not None else "-",
+                f"{mem:,.0f}" if mem else "-",
             ])
             if "selfcheck_max_rate_diff" in r:
                 checks.append((f"{d['dataset']} / {r['method']}", r["selfcheck_max_rate_diff"],
@@ -411,8 +422,10 @@ def table(results, threads):
     out = "\n".join(lines)
     out += ("\n\nPR/RR/F1/prec: point-wise; vPR..vprec: voxel-wise at 0.2 m (majority vote per voxel). "
             "prec = precision of removal.\npoints/s and time: seam = wall time of its ingest's evidence step "
-            "(ray casting, DOR, files), DUFOMap = run+propagate+segment wall time (scans preloaded); "
-            f"{threads if threads > 0 else 'all'} threads each.")
+            "(reading its scans, ray casting, DOR, writing its files), DUFOMap = run+propagate+segment wall time "
+            f"(scans preloaded); {threads if threads > 0 else 'all'} threads each.\nmem pts/s: seam without reading "
+            "scans and writing files (the step's `generate_s`: ray casting, evidence, DOR, cleaned map in memory), "
+            "the like of DUFOMap's timing; DUFOMap: its points/s again.")
     if flagged:
         out += (f"\n* other processes kept more than {BUSY_FLAG} of a core busy on average while this was timed "
                 "(seam: over its whole ingest): the speed is pessimistic; re-run on a quiet machine.")

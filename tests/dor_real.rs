@@ -33,6 +33,13 @@ fn dor_scores(seq_dir: &Path, tmp: &Path, name: &str, toml: &str) -> Value {
     let o = run(&["eval", "dor", st, "--labels", seq_dir.to_str().unwrap(), "--format", "json"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let v: Value = serde_json::from_str(&stdout(&o)).unwrap();
+    // The step's in-memory part (ray casting, DOR, cleaned map) is timed
+    // within the whole step, which also reads the scans and writes files.
+    let (step_s, in_memory_s) = (v["evidence_s"].as_f64(), v["in_memory_s"].as_f64());
+    assert!(
+        matches!((step_s, in_memory_s), (Some(s), Some(m)) if m > 0.0 && m <= s),
+        "{name}: evidence step {step_s:?} s, in memory {in_memory_s:?} s"
+    );
     let p = v["scores"]["point"].clone();
     eprintln!(
         "{name}: PR {:.2} RR {:.2} F1 {:.2} %",

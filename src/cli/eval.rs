@@ -95,6 +95,9 @@ pub fn run(ctx: &Ctx, cmd: EvalCommand) -> anyhow::Result<()> {
                     if let (Some(s), Some(r)) = (report.evidence_s, report.points_per_s) {
                         println!("evidence step: {s:.2} s, {r:.0} points/s");
                     }
+                    if let (Some(s), Some(r)) = (report.in_memory_s, report.in_memory_points_per_s) {
+                        println!("  of which in memory (ray casting, DOR, cleaned map): {s:.2} s, {r:.0} points/s");
+                    }
                     print!("{}", render_table(&report.scores));
                 }
             }
