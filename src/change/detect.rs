@@ -118,7 +118,11 @@ pub struct ChangeConfig {
 /// points fewer removed-object voxels static on every row: see
 /// `EvidenceConfig::n_sat`.)
 ///
-/// `free_support_keyframes = 3` on the demo site: 99.09 / 20.74 %. What it
+/// `free_support_keyframes = 3` on the demo site: 99.09 / 20.74 %; on the
+/// 5 × 150-keyframe sites of `bench/change_sites.py` (seed 3, 2026-12-02),
+/// HDL-64E 99.32 / 8.12 → 99.05 / 7.56 % and VLP-16 99.33 / 17.80 → 99.10 /
+/// 14.83 %: a third more permanent structure lost for a tenth to a sixth
+/// fewer leftovers, so the default stays 5. What it
 /// costs grows with misalignment between sessions: on earlier 80-keyframe
 /// sites whose sessions were 0.3-0.65 m apart (too little route overlap for
 /// loops), `omega_or_support` with n = 8 kept only 97.30 % of HDL-64E's

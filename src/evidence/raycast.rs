@@ -231,6 +231,11 @@ impl Skip for BlockMask {
 /// [`Dda::jump_empty`] instead of walked. A jump moves each axis at most to the
 /// block entered and never past the endpoint's key, so the walk still ends
 /// at the endpoint's voxel after `|Δi| + |Δj| + |Δk|` steps in all.
+///
+/// Tried and dropped: setting `t_max = ∞` on the axes that reached the
+/// endpoint's key, so that the axis choice is a plain minimum without the
+/// `key != stop` tests. Same results, no faster (SemanticKITTI 04's evidence
+/// step 1.17-1.23 s before, 1.21-1.29 s after, alternating runs).
 fn walk<S: Skip>(
     origin_m: &[f64; 3],
     end_m: &[f64; 3],
