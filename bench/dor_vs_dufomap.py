@@ -45,8 +45,8 @@ writing its files) and over DUFOMap's run + propagate + segment wall time,
 which has the scans preloaded and writes nothing. "mem pts/s" puts seam on
 DUFOMap's footing: the same step without reading the scans and writing
 files (`in_memory_s` of `seam eval dor`, the step log's `generate_s`: ray
-casting, evidence, DOR and the cleaned map, all in memory). Both get `--threads` threads
-(default 2, this machine's cores): DUFOMap's `num_threads`, and seam's rayon
+casting, evidence, DOR and the cleaned map, all in memory). Both get
+`--threads` threads (default 2, this machine's cores): DUFOMap's `num_threads`, and seam's rayon
 pool through RAYON_NUM_THREADS (0: each picks all cores). The seam binary is
 copied into the work folder first, so a concurrent `cargo build` cannot swap
 it mid-run.

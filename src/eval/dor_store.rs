@@ -19,7 +19,8 @@ pub struct DorReport {
     pub predicted: String,
     pub model: Option<String>,
     pub points: u64,
-    /// Wall time of the session's evidence step (ray casting, DOR, files).
+    /// Wall time of the session's evidence step (reading its scans, ray
+    /// casting, DOR, writing its files).
     pub evidence_s: Option<f64>,
     pub points_per_s: Option<f64>,
     /// The same step without its reading of the scans, moving of the
