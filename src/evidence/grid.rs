@@ -33,7 +33,7 @@
 
 use super::ground::GroundLevel;
 use super::no_return::NoReturn;
-use super::raycast::{BlockMask, cast_ray, cast_ray_masked, voxel_key};
+use super::raycast::{BlockMask, cast_ray, cast_ray_ranked, voxel_key};
 use super::stats::{DirectionalStats, EvidenceConfig, EvidenceModel, VoxelEvidence};
 use super::surface::SurfaceShapes;
 use super::tables::{StatsColumns, SubmapEvidence};
@@ -218,10 +218,19 @@ pub(super) fn bit_set(bits: &[u64], i: usize) -> bool {
 
 /// One keyframe's marks: `all` (hits, and frees above `free_clearance_m`)
 /// and `band`, the frees only the lower clearance of vacated map voxels
-/// allows (`EvidenceConfig::free_vacated_low`).
-struct KeyframeMarks {
-    all: Marks,
-    band: Option<Marks>,
+/// allows (`EvidenceConfig::free_vacated_low`); over the keyframe's ray box
+/// `b`, by voxel of interest ([`RankMarks`]) or, where the interest set has
+/// no mask, by place in the box ([`Marks`]).
+struct KeyframeMarks<M> {
+    b: Box3,
+    all: M,
+    band: Option<M>,
+}
+
+/// Where one keyframe's marks are: both kinds of [`KeyframeMarks`].
+enum AnyMarks {
+    Rank(KeyframeMarks<RankMarks>),
+    Box(KeyframeMarks<Marks>),
 }
 
 impl Marks {
@@ -324,6 +333,56 @@ fn zeroed_atomics(n: usize) -> Box<[AtomicU64]> {
             std::alloc::handle_alloc_error(layout);
         }
         Box::from_raw(std::ptr::slice_from_raw_parts_mut(ptr, n))
+    }
+}
+
+/// 2 bits per voxel of interest, by [`BlockMask::rank_of`]: the marks of
+/// one keyframe when the interest set has a mask (the usual case).
+///
+/// Why not [`Marks`] over the ray box: a SemanticKITTI scan's box is
+/// 10^7-10^8 voxels, megabytes of bitmap whose pages fault in as the rays
+/// touch them (a tenth of the ray casting), and whose marks are scattered
+/// over them; the interest set is 10^5-10^6 voxels, a bitmap of tens to
+/// hundreds of kilobytes that stays in cache. The walk hands out each
+/// voxel's rank ([`super::raycast::cast_ray_ranked`]), so marking costs no
+/// lookup.
+pub(super) struct RankMarks {
+    words: Box<[AtomicU64]>,
+}
+
+impl RankMarks {
+    fn new(voxels: usize) -> RankMarks {
+        RankMarks { words: zeroed_atomics(voxels.div_ceil(32)) }
+    }
+
+    #[inline]
+    fn mark(&self, rank: u32, kind: u64) {
+        let word = &self.words[(rank / 32) as usize];
+        let bits = kind << (2 * (rank % 32));
+        // As in `Marks::mark`: read first, so shared lines stay shared.
+        if word.load(Ordering::Relaxed) & bits != bits {
+            word.fetch_or(bits, Ordering::Relaxed);
+        }
+    }
+
+    #[inline]
+    fn get(&self, rank: usize) -> u64 {
+        (self.words[rank / 32].load(Ordering::Relaxed) >> (2 * (rank % 32))) & 3
+    }
+
+    /// [`Marks::hit_near`] for these marks: voxels outside `b` count as
+    /// unmarked, and voxels not of interest were never hit.
+    fn hit_near(&self, k: &[i32; 3], r: i32, b: &Box3, mask: &BlockMask, ground: Option<&GroundLevel>) -> bool {
+        if r <= 0 {
+            return false;
+        }
+        let lo = [0, 1, 2].map(|a| (k[a] - r).max(b.lo[a]));
+        let hi = [0, 1, 2].map(|a| (k[a] + r).min(b.hi[a]));
+        mask.any_in_box(lo, hi, |n, rank| {
+            n != *k
+                && self.get(rank) & HIT != 0
+                && !(n[2] < k[2] && ground.is_some_and(|g| g.at_ground(&n) == Some(true)))
+        })
     }
 }
 
@@ -514,6 +573,8 @@ pub struct KeyIndex {
     mask: Option<BlockMask>,
     /// The index of each key, in the mask's rank order.
     index_of_rank: Vec<u32>,
+    /// The rank of each key, in key order (the inverse of `index_of_rank`).
+    rank_of_index: Vec<u32>,
 }
 
 impl KeyIndex {
@@ -524,19 +585,27 @@ impl KeyIndex {
         } else {
             BlockMask::new(bounds.lo, bounds.hi, keys.iter().map(|&k| unpack(k).0), 1 << 28)
         };
-        let index_of_rank = match &mask {
+        let (index_of_rank, rank_of_index) = match &mask {
             Some(mask) => {
                 let mut out = vec![u32::MAX; keys.len()];
+                let mut ranks = vec![u32::MAX; keys.len()];
                 for (i, &k) in keys.iter().enumerate() {
                     if let Some(r) = mask.rank_of(&unpack(k).0) {
                         out[r] = i as u32;
+                        ranks[i] = r as u32;
                     }
                 }
-                out
+                (out, ranks)
             }
-            None => Vec::new(),
+            None => (Vec::new(), Vec::new()),
         };
-        KeyIndex { mask, index_of_rank }
+        KeyIndex { mask, index_of_rank, rank_of_index }
+    }
+
+    /// The [`BlockMask::rank_of`] of key `i` (with a mask).
+    #[inline]
+    fn rank_of_index(&self, i: usize) -> usize {
+        self.rank_of_index[i] as usize
     }
 
     /// The keys as a mask, `None` where their bounds are too large for one.
@@ -771,62 +840,100 @@ impl InterestEvidence {
         let cast = if b.is_empty() {
             points_m.iter().filter(|p| voxel_key(p, v).is_some()).count()
         } else {
-            let marks = Marks::new(b);
             // Only interest voxels get evidence: rays report only those and
             // jump over the blocks that hold none.
             let mask = self.blocks();
             // Voxels freed only under the lower clearance of the unguarded
             // (vacated map) voxels.
-            let band =
-                (!self.unguarded.is_empty() && cfg.vacated_clearance_m < cfg.free_clearance_m).then(|| Marks::new(b));
+            let banded = !self.unguarded.is_empty() && cfg.vacated_clearance_m < cfg.free_clearance_m;
             let ground = self.ground.as_deref().filter(|_| cfg.clearance_near_ground_only);
-            let cast: usize = points_m
-                .par_iter()
-                .with_min_len(2048)
-                .map(|p| {
-                    // Free voxels of a downward ray that ends at the ground
-                    // stop `free_clearance_m` above its endpoint (centre z ≥
-                    // z_min ⇔ key z ≥ kz_min). The ground level is looked up
-                    // only for rays that drop enough to need it.
-                    let ground_ray = p[2] < origin_m[2] - CLEARANCE_MIN_DROP_M
-                        && ground.is_none_or(|g| voxel_key(p, v).is_none_or(|k| g.at_ground(&k.0).unwrap_or(true)));
-                    let kz_above = |clearance_m: f64| {
-                        if ground_ray && clearance_m > 0.0 {
-                            ((p[2] + clearance_m) / v - 0.5).ceil().clamp(i32::MIN as f64, i32::MAX as f64) as i32
-                        } else {
-                            i32::MIN
-                        }
-                    };
-                    let kz_min = kz_above(cfg.free_clearance_m);
-                    let kz_band = kz_above(cfg.vacated_clearance_m);
-                    let on_free = |k: VoxelKey| {
-                        // A voxel with a shape frees only where the ray
-                        // crosses it (evidence::surface).
-                        let shape = shapes.and_then(|shapes| shapes.at(&k.0));
-                        let free = match shape {
-                            Some(s) => (s.clearance_exempt || k.0[2] >= kz_min) && s.passes(k.0, v, origin_m, p),
-                            None => k.0[2] >= kz_min,
-                        };
-                        if free {
-                            marks.mark(k, FREE)
-                        } else if shape.is_none()
-                            && k.0[2] >= kz_band
-                            && let Some(band) = &band
-                        {
-                            band.mark(k, FREE)
-                        }
-                    };
-                    let hit = match mask {
-                        Some(mask) => cast_ray_masked(origin_m, p, v, mask, on_free),
-                        None => cast_ray(origin_m, p, v, on_free),
-                    };
-                    if let Some(k) = hit {
-                        marks.mark(k, HIT);
+            // Per ray: the lowest key z its frees may reach above a ground
+            // end, under `free_clearance_m` and under `vacated_clearance_m`.
+            let clearances = |p: &[f64; 3]| {
+                // Free voxels of a downward ray that ends at the ground
+                // stop `free_clearance_m` above its endpoint (centre z ≥
+                // z_min ⇔ key z ≥ kz_min). The ground level is looked up
+                // only for rays that drop enough to need it.
+                let ground_ray = p[2] < origin_m[2] - CLEARANCE_MIN_DROP_M
+                    && ground.is_none_or(|g| voxel_key(p, v).is_none_or(|k| g.at_ground(&k.0).unwrap_or(true)));
+                let kz_above = |clearance_m: f64| {
+                    if ground_ray && clearance_m > 0.0 {
+                        ((p[2] + clearance_m) / v - 0.5).ceil().clamp(i32::MIN as f64, i32::MAX as f64) as i32
+                    } else {
+                        i32::MIN
                     }
-                    hit.is_some() as usize
-                })
-                .sum();
-            let marks = KeyframeMarks { all: marks, band };
+                };
+                (kz_above(cfg.free_clearance_m), kz_above(cfg.vacated_clearance_m))
+            };
+            // Whether a ray to `p` frees voxel `k` (`Some(true)`), frees it
+            // only under the lower clearance (`Some(false)`), or not at all.
+            let frees = |k: &VoxelKey, p: &[f64; 3], (kz_min, kz_band): (i32, i32)| {
+                // A voxel with a shape frees only where the ray crosses it
+                // (evidence::surface).
+                let shape = shapes.and_then(|shapes| shapes.at(&k.0));
+                match shape {
+                    Some(s) => {
+                        ((s.clearance_exempt || k.0[2] >= kz_min) && s.passes(k.0, v, origin_m, p)).then_some(true)
+                    }
+                    None if k.0[2] >= kz_min => Some(true),
+                    None => (k.0[2] >= kz_band).then_some(false),
+                }
+            };
+            let (cast, marks) = match mask {
+                Some(mask) => {
+                    let marks = KeyframeMarks {
+                        b,
+                        all: RankMarks::new(mask.count()),
+                        band: banded.then(|| RankMarks::new(mask.count())),
+                    };
+                    let cast: usize = points_m
+                        .par_iter()
+                        .with_min_len(2048)
+                        .map(|p| {
+                            let kz = clearances(p);
+                            let on_free = |k: VoxelKey, rank: u32| {
+                                if !b.contains(&k.0) {
+                                    return;
+                                }
+                                match (frees(&k, p, kz), &marks.band) {
+                                    (Some(true), _) => marks.all.mark(rank, FREE),
+                                    (Some(false), Some(band)) => band.mark(rank, FREE),
+                                    _ => {}
+                                }
+                            };
+                            let hit = cast_ray_ranked(origin_m, p, v, mask, on_free);
+                            if let Some((k, Some(rank))) = hit
+                                && b.contains(&k.0)
+                            {
+                                marks.all.mark(rank, HIT);
+                            }
+                            hit.is_some() as usize
+                        })
+                        .sum();
+                    (cast, AnyMarks::Rank(marks))
+                }
+                None => {
+                    let marks = KeyframeMarks { b, all: Marks::new(b), band: banded.then(|| Marks::new(b)) };
+                    let cast: usize = points_m
+                        .par_iter()
+                        .with_min_len(2048)
+                        .map(|p| {
+                            let kz = clearances(p);
+                            let on_free = |k: VoxelKey| match (frees(&k, p, kz), &marks.band) {
+                                (Some(true), _) => marks.all.mark(k, FREE),
+                                (Some(false), Some(band)) => band.mark(k, FREE),
+                                _ => {}
+                            };
+                            let hit = cast_ray(origin_m, p, v, on_free);
+                            if let Some(k) = hit {
+                                marks.all.mark(k, HIT);
+                            }
+                            hit.is_some() as usize
+                        })
+                        .sum();
+                    (cast, AnyMarks::Box(marks))
+                }
+            };
             let (h, f) = self.apply(&marks, origin_m, keyframe, cfg, shapes, &sky_bits);
             out.hit_voxels = h;
             out.free_voxels = f;
@@ -892,15 +999,18 @@ impl InterestEvidence {
     /// is freed next to the keyframe's own hits too.
     fn apply(
         &mut self,
-        marks: &KeyframeMarks,
+        marks: &AnyMarks,
         origin_m: &[f64; 3],
         keyframe: u32,
         cfg: &EvidenceConfig,
         shapes: Option<&SurfaceShapes>,
         skip: &[u64],
     ) -> (usize, usize) {
-        let KeyframeMarks { all: marks, band } = marks;
-        let (lo, hi) = self.x_range(&marks.b);
+        let b = match marks {
+            AnyMarks::Rank(m) => m.b,
+            AnyMarks::Box(m) => m.b,
+        };
+        let (lo, hi) = self.x_range(&b);
         let v = self.voxel_m;
         let (l_hit, l_miss, l_min, l_max) = cfg.log_odds.log_odds();
         // The guard's radius: `free_guard_voxels`, widened with range to the
@@ -908,13 +1018,29 @@ impl InterestEvidence {
         let guard_rad = cfg.free_guard_deg.to_radians();
         let guard_voxels = |r_m: f64| (cfg.free_guard_voxels as i32).max((r_m * guard_rad / v).ceil() as i32);
         let ground = self.ground.as_deref().filter(|_| !cfg.ground_hits_guard);
-        let keys = &self.keys[lo..hi];
-        let unguarded = &self.unguarded;
+        let InterestEvidence { keys, rows, log_odds, unguarded, index, .. } = self;
+        let index = index.get();
+        let mask = index.and_then(|i| i.mask());
+        let keys = &keys[lo..hi];
         let self_unguarded = |i: usize| bit_set(unguarded, i);
+        // The marks of row `i` (key `k`, inside `b`): all, and the band's.
+        let kinds_of = |i: usize, k: &[i32; 3]| match (marks, index) {
+            (AnyMarks::Rank(m), Some(index)) => {
+                let r = index.rank_of_index(i);
+                (m.all.get(r), m.band.as_ref().map_or(0, |band| band.get(r)))
+            }
+            (AnyMarks::Box(m), _) => (m.all.get(k), m.band.as_ref().map_or(0, |band| band.get(k))),
+            (AnyMarks::Rank(_), None) => unreachable!("rank marks are made from the index's mask"),
+        };
+        let hit_near = |k: &[i32; 3], r: i32| match (marks, mask) {
+            (AnyMarks::Rank(m), Some(mask)) => m.all.hit_near(k, r, &b, mask, ground),
+            (AnyMarks::Box(m), _) => m.all.hit_near(k, r, ground),
+            (AnyMarks::Rank(_), None) => unreachable!("rank marks are made from the index's mask"),
+        };
         let hit_free = AtomicU64::new(0);
-        self.rows[lo..hi]
+        rows[lo..hi]
             .par_iter_mut()
-            .zip(self.log_odds[lo..hi].par_iter_mut())
+            .zip(log_odds[lo..hi].par_iter_mut())
             .zip(keys.par_iter())
             .enumerate()
             .with_min_len(4096)
@@ -924,20 +1050,18 @@ impl InterestEvidence {
                     return;
                 }
                 let k = unpack(pk).0;
-                if !marks.b.contains(&k) {
+                if !b.contains(&k) {
                     return;
                 }
-                let mut kinds = marks.get(&k);
-                if let Some(band) = band
-                    && self_unguarded(i)
-                {
-                    kinds |= band.get(&k) & FREE;
+                let (mut kinds, band) = kinds_of(i, &k);
+                if self_unguarded(i) {
+                    kinds |= band & FREE;
                 }
                 if kinds == 0 {
                     return;
                 }
                 let guarded = || {
-                    marks.hit_near(&k, guard_voxels(ray_to_centre(VoxelKey(k), origin_m, v).1), ground)
+                    hit_near(&k, guard_voxels(ray_to_centre(VoxelKey(k), origin_m, v).1))
                         && !self_unguarded(i)
                         && !shapes.and_then(|s| s.at(&k)).is_some_and(|s| s.from_map)
                 };

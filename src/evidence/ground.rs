@@ -30,39 +30,106 @@ use rustc_hash::FxHashMap;
 /// ground level.
 pub const GROUND_BAND_VOXELS: i32 = 1;
 
+/// Columns a dense [`GroundLevel`] holds at most (4 bytes each: 32 MiB);
+/// keys spread wider fall back to a hash map.
+const DENSE_MAX_COLUMNS: u64 = 1 << 23;
+
+/// No point in the column (dense layout).
+const NO_GROUND: i32 = i32::MAX;
+
 /// The lowest occupied key z of every (x, y) key column.
+///
+/// Dense over the keys' (x, y) bounds where they fit
+/// [`DENSE_MAX_COLUMNS`]: every downward ray looks its endpoint's column
+/// up, and a scan's consecutive rays end in neighbouring columns, which a
+/// grid keeps on the same cache lines where a hash map scatters them (on
+/// SemanticKITTI 08 the hash probe was an eighth of the ray casting).
 #[derive(Debug, Clone, Default)]
 pub struct GroundLevel {
-    lowest_kz: FxHashMap<(i32, i32), i32>,
+    columns: Columns,
+}
+
+#[derive(Debug, Clone)]
+enum Columns {
+    /// `lowest_kz[(y - lo_y) * dx + (x - lo_x)]`, [`NO_GROUND`] for none.
+    Dense {
+        lo: [i32; 2],
+        dims: [u64; 2],
+        lowest_kz: Vec<i32>,
+        count: usize,
+    },
+    Sparse(FxHashMap<(i32, i32), i32>),
+}
+
+impl Default for Columns {
+    fn default() -> Self {
+        Columns::Sparse(FxHashMap::default())
+    }
 }
 
 impl GroundLevel {
     /// From packed keys of occupied voxels (any order, repeats allowed).
-    pub fn from_keys<'a>(keys: impl IntoIterator<Item = &'a u64>) -> GroundLevel {
-        let mut lowest_kz: FxHashMap<(i32, i32), i32> = FxHashMap::default();
+    pub fn from_keys<'a>(keys: impl IntoIterator<Item = &'a u64> + Clone) -> GroundLevel {
+        let (mut lo, mut hi) = ([i32::MAX; 2], [i32::MIN; 2]);
+        for &k in keys.clone() {
+            let [x, y, _] = unpack(k).0;
+            (lo, hi) = ([lo[0].min(x), lo[1].min(y)], [hi[0].max(x), hi[1].max(y)]);
+        }
+        let dims = [0, 1].map(|a| (hi[a] as i64 - lo[a] as i64 + 1).max(0) as u64);
+        let n = dims[0].saturating_mul(dims[1]);
+        if n == 0 || n > DENSE_MAX_COLUMNS {
+            let mut lowest_kz: FxHashMap<(i32, i32), i32> = FxHashMap::default();
+            for &k in keys {
+                let [x, y, z] = unpack(k).0;
+                lowest_kz.entry((x, y)).and_modify(|low| *low = (*low).min(z)).or_insert(z);
+            }
+            return GroundLevel { columns: Columns::Sparse(lowest_kz) };
+        }
+        let mut lowest_kz = vec![NO_GROUND; n as usize];
         for &k in keys {
             let [x, y, z] = unpack(k).0;
-            lowest_kz.entry((x, y)).and_modify(|low| *low = (*low).min(z)).or_insert(z);
+            let i = ((y as i64 - lo[1] as i64) as u64 * dims[0] + (x as i64 - lo[0] as i64) as u64) as usize;
+            lowest_kz[i] = lowest_kz[i].min(z);
         }
-        GroundLevel { lowest_kz }
+        let count = lowest_kz.iter().filter(|&&z| z != NO_GROUND).count();
+        GroundLevel { columns: Columns::Dense { lo, dims, lowest_kz, count } }
+    }
+
+    /// The lowest occupied key z of column (x, y) of `k`, if any.
+    #[inline]
+    fn lowest(&self, k: &[i32; 3]) -> Option<i32> {
+        match &self.columns {
+            Columns::Dense { lo, dims, lowest_kz, .. } => {
+                let (dx, dy) = (k[0] as i64 - lo[0] as i64, k[1] as i64 - lo[1] as i64);
+                if dx < 0 || dy < 0 || dx as u64 >= dims[0] || dy as u64 >= dims[1] {
+                    return None;
+                }
+                let z = lowest_kz[(dy as u64 * dims[0] + dx as u64) as usize];
+                (z != NO_GROUND).then_some(z)
+            }
+            Columns::Sparse(m) => m.get(&(k[0], k[1])).copied(),
+        }
     }
 
     /// Whether voxel `k` lies at its column's ground level; `None` when the
     /// column holds no occupied voxel.
     #[inline]
     pub fn at_ground(&self, k: &[i32; 3]) -> Option<bool> {
-        self.lowest_kz.get(&(k[0], k[1])).map(|&low| k[2] <= low.saturating_add(GROUND_BAND_VOXELS))
+        self.lowest(k).map(|low| k[2] <= low.saturating_add(GROUND_BAND_VOXELS))
     }
 
     /// Whether voxel `k` is its column's lowest occupied voxel (`false`
     /// when the column holds none).
     #[inline]
     pub fn is_lowest(&self, k: &[i32; 3]) -> bool {
-        self.lowest_kz.get(&(k[0], k[1])).is_some_and(|&low| k[2] <= low)
+        self.lowest(k).is_some_and(|low| k[2] <= low)
     }
 
     pub fn columns(&self) -> usize {
-        self.lowest_kz.len()
+        match &self.columns {
+            Columns::Dense { count, .. } => *count,
+            Columns::Sparse(m) => m.len(),
+        }
     }
 }
 
@@ -85,5 +152,27 @@ mod tests {
         assert_eq!(g.at_ground(&[1, 0, 4]), Some(true));
         assert_eq!(g.at_ground(&[1, 0, 5]), Some(false));
         assert_eq!(g.at_ground(&[2, 0, 0]), None, "a column without points has no ground level");
+    }
+
+    #[test]
+    fn keys_spread_too_wide_for_a_grid_give_the_same_levels_from_a_hash_map() {
+        // 5,001 × 4,001 columns: past DENSE_MAX_COLUMNS, so the sparse layout.
+        let far = [[0, 0, 5], [0, 0, -2], [5000, 4000, 3], [5000, 4000, 1], [-1, 2, 0]];
+        let keys: Vec<u64> = far.iter().map(|&k| pack(VoxelKey(k)).unwrap()).collect();
+        let g = GroundLevel::from_keys(&keys);
+        assert!(matches!(g.columns, Columns::Sparse(_)));
+        let near: Vec<u64> = keys.iter().take(2).chain(keys.iter().skip(4)).copied().collect();
+        let d = GroundLevel::from_keys(&near);
+        assert!(matches!(d.columns, Columns::Dense { .. }));
+        assert_eq!((g.columns(), d.columns()), (3, 2));
+        for k in [[0, 0, -2], [0, 0, -1], [0, 0, 0], [-1, 2, 1], [-1, 2, 2], [7, 7, 0], [-9, 2, 0]] {
+            assert_eq!(g.at_ground(&k), d.at_ground(&k), "{k:?}");
+            assert_eq!(g.is_lowest(&k), d.is_lowest(&k), "{k:?}");
+        }
+        assert_eq!(g.at_ground(&[5000, 4000, 2]), Some(true));
+        assert_eq!(g.at_ground(&[5000, 4000, 3]), Some(false));
+        assert!(g.is_lowest(&[5000, 4000, 1]) && !g.is_lowest(&[5000, 4000, 2]));
+        assert_eq!(d.at_ground(&[-1, 2, 1]), Some(true));
+        assert_eq!(d.at_ground(&[1, 0, 0]), None, "inside the grid, no point in the column");
     }
 }

@@ -40,7 +40,7 @@ pub fn voxel_key(p_m: &[f64; 3], voxel_m: f64) -> Option<VoxelKey> {
 /// length L visits at most `3·L/voxel_m + 1` voxels: very long rays are slow
 /// but finite.
 pub fn traverse(origin_m: &[f64; 3], end_m: &[f64; 3], voxel_m: f64, mut f: impl FnMut(VoxelKey)) -> usize {
-    walk(origin_m, end_m, voxel_m, &Unmasked, |k, _| f(k)).map_or(0, |(visited, _)| visited)
+    walk(origin_m, end_m, voxel_m, &Unmasked, |k, _, _| f(k)).map_or(0, |(visited, _)| visited)
 }
 
 /// Which voxels a walk reports. [`Unmasked`] reports all; [`BlockMask`]
@@ -51,8 +51,9 @@ trait Skip {
     /// Whether the block with block coordinates `block` holds no voxel of
     /// interest.
     fn is_empty_block(&self, block: &[i32; 3]) -> bool;
-    /// The block's voxels of interest, bit [`voxel_bit`] each (0: none).
-    fn block_voxels(&self, block: &[i32; 3]) -> u64;
+    /// The block's voxels of interest, bit [`voxel_bit`] each (0: none),
+    /// and the rank of its first ([`BlockMask::rank_of`]; 0 unmasked).
+    fn block_voxels(&self, block: &[i32; 3]) -> (u64, u32);
 }
 
 struct Unmasked;
@@ -64,8 +65,8 @@ impl Skip for Unmasked {
         false
     }
     #[inline(always)]
-    fn block_voxels(&self, _: &[i32; 3]) -> u64 {
-        u64::MAX
+    fn block_voxels(&self, _: &[i32; 3]) -> (u64, u32) {
+        (u64::MAX, 0)
     }
 }
 
@@ -93,7 +94,7 @@ fn voxel_bit(key: &[i32; 3]) -> u64 {
 /// Why: evidence is kept only on the voxels some point occupies
 /// (`super::grid`), and on the sites measured 75-90 % of a ray's walk
 /// crosses 0.8 m blocks that hold none of them (open air), and most of the
-/// rest passes voxels that are not of interest either. [`cast_ray_masked`]
+/// rest passes voxels that are not of interest either. [`cast_ray_ranked`]
 /// jumps over an empty block in one step and reports only voxels of
 /// interest. Voxels outside the box are not of interest.
 #[derive(Debug, Clone)]
@@ -167,6 +168,55 @@ impl BlockMask {
         (w & bit != 0).then(|| self.voxel_rank[slot] as usize + (w & (bit - 1)).count_ones() as usize)
     }
 
+    /// Whether `f(key, rank)` holds for some voxel of interest in the
+    /// inclusive key box `lo..=hi` (stops at the first). Block by block:
+    /// the box's voxels in a block are a bit pattern of its word, so a
+    /// small neighbourhood costs a few block reads, not a
+    /// [`Self::rank_of`] per voxel.
+    pub fn any_in_box(&self, lo: [i32; 3], hi: [i32; 3], mut f: impl FnMut([i32; 3], usize) -> bool) -> bool {
+        if (0..3).any(|a| lo[a] > hi[a]) {
+            return false;
+        }
+        let (blo, bhi) = (block_of(&lo), block_of(&hi));
+        // The 4 bits of an axis's local coordinates inside the box.
+        let local = |a: usize, bc: i32| -> u64 {
+            let base = bc << BLOCK_SHIFT;
+            let from = (lo[a] - base).max(0);
+            let to = (hi[a] - base).min(EDGE);
+            ((1u64 << (to + 1)) - 1) & !((1u64 << from) - 1)
+        };
+        // A 1 at the first bit of each row (y) or plane (z) in the box: a
+        // block's bit index is x + y · 2^BLOCK_SHIFT + z · 2^(2·BLOCK_SHIFT),
+        // so the x pattern times both gives the box's bits.
+        let spread = |m: u64, shift: u32| {
+            (0..=EDGE as u32).filter(|i| (m >> i) & 1 != 0).map(|i| 1u64 << (i << shift)).sum::<u64>()
+        };
+        for bz in blo[2]..=bhi[2] {
+            let zm = spread(local(2, bz), 2 * BLOCK_SHIFT);
+            for by in blo[1]..=bhi[1] {
+                let ym = spread(local(1, by), BLOCK_SHIFT);
+                for bx in blo[0]..=bhi[0] {
+                    let (word, base) = self.block_voxels(&[bx, by, bz]);
+                    let mut m = word & (local(0, bx) * ym * zm);
+                    while m != 0 {
+                        let bit = m & m.wrapping_neg();
+                        m ^= bit;
+                        let pos = bit.trailing_zeros() as i32;
+                        let key = [
+                            (bx << BLOCK_SHIFT) + (pos & EDGE),
+                            (by << BLOCK_SHIFT) + ((pos >> BLOCK_SHIFT) & EDGE),
+                            (bz << BLOCK_SHIFT) + (pos >> (2 * BLOCK_SHIFT)),
+                        ];
+                        if f(key, (base + (word & (bit - 1)).count_ones()) as usize) {
+                            return true;
+                        }
+                    }
+                }
+            }
+        }
+        false
+    }
+
     #[inline]
     fn index_block(&self, block: &[i32; 3]) -> Option<u64> {
         let mut c = [0u64; 3];
@@ -192,7 +242,7 @@ impl BlockMask {
     /// Whether voxel `key` is of interest.
     #[inline]
     pub fn holds(&self, key: &[i32; 3]) -> bool {
-        self.block_voxels(&block_of(key)) & voxel_bit(key) != 0
+        self.block_voxels(&block_of(key)).0 & voxel_bit(key) != 0
     }
 }
 
@@ -217,14 +267,15 @@ impl Skip for BlockMask {
         self.index_block(block).is_none_or(|i| self.present[(i / 64) as usize] & (1 << (i % 64)) == 0)
     }
     #[inline]
-    fn block_voxels(&self, block: &[i32; 3]) -> u64 {
-        self.slot(block).map_or(0, |s| self.voxels[s])
+    fn block_voxels(&self, block: &[i32; 3]) -> (u64, u32) {
+        self.slot(block).map_or((0, 0), |s| (self.voxels[s], self.voxel_rank[s]))
     }
 }
 
-/// The walk behind [`traverse`] and the casts: calls `f(key, remaining)`
-/// for every voxel visited, `remaining` the steps still to go (0 at the
-/// endpoint's voxel), and returns the number of steps walked one voxel at
+/// The walk behind [`traverse`] and the casts: calls `f(key, remaining,
+/// rank)` for every voxel visited, `remaining` the steps still to go (0 at
+/// the endpoint's voxel) and `rank` the voxel's [`BlockMask::rank_of`]
+/// (0 unmasked), and returns the number of steps walked one voxel at
 /// a time and the endpoint's voxel (`None`, visiting nothing, for the rays
 /// [`traverse`] refuses). With a skipping `mask`, only its voxels of interest
 /// are reported, and empty blocks the endpoint is not in are left by
@@ -241,7 +292,7 @@ fn walk<S: Skip>(
     end_m: &[f64; 3],
     voxel_m: f64,
     mask: &S,
-    mut f: impl FnMut(VoxelKey, u64),
+    mut f: impl FnMut(VoxelKey, u64, u32),
 ) -> Option<(usize, VoxelKey)> {
     if !(voxel_m.is_finite() && voxel_m > 0.0) {
         return None;
@@ -271,40 +322,71 @@ fn walk<S: Skip>(
             t_delta[a] = voxel_m / d.abs();
         }
     }
-    let mut ray = Dda { key, stop, step, t_max, t_delta, remaining };
+    // The walk's state stays in locals updated at constant indices (the
+    // `match` below), so that it lives in registers: indexing the arrays by
+    // the chosen axis put them in memory, each step a store and reloads.
+    // Only a block change hands it to [`Dda::enter_block`].
+    let (mut key, mut t_max) = (key, t_max);
     let mut visited = 1;
     // The current block's voxels of interest (all, unmasked).
-    let mut here = u64::MAX;
+    let (mut here, mut base) = (u64::MAX, 0u32);
+    // The rank of the current voxel, of interest in the current block.
+    let rank = |here: u64, base: u32, key: &[i32; 3]| {
+        if S::SKIPS { base + (here & (voxel_bit(key) - 1)).count_ones() } else { 0 }
+    };
+    let enter = |key: &mut [i32; 3], t_max: &mut [f64; 3], remaining: &mut u64| {
+        let mut ray = Dda { key: *key, stop, step, t_max: *t_max, t_delta, remaining: *remaining };
+        let here = ray.enter_block(mask);
+        (*key, *t_max, *remaining) = (ray.key, ray.t_max, ray.remaining);
+        here
+    };
     if S::SKIPS {
-        here = ray.enter_block(mask);
+        (here, base) = enter(&mut key, &mut t_max, &mut remaining);
     }
-    if !S::SKIPS || here & voxel_bit(&ray.key) != 0 {
-        f(VoxelKey(ray.key), ray.remaining);
+    if !S::SKIPS || here & voxel_bit(&key) != 0 {
+        f(VoxelKey(key), remaining, rank(here, base, &key));
     }
-    while ray.remaining > 0 {
-        // The earliest crossing among axes that still have to move.
-        let mut axis = usize::MAX;
-        for a in 0..3 {
-            if ray.key[a] != ray.stop[a] && (axis == usize::MAX || ray.t_max[a] < ray.t_max[axis]) {
-                axis = a;
-            }
+    while remaining > 0 {
+        // The earliest crossing among axes that still have to move; ties
+        // to the lower axis.
+        let mut axis = 3;
+        let mut t = f64::INFINITY;
+        if key[0] != stop[0] {
+            (axis, t) = (0, t_max[0]);
         }
-        let before = ray.key[axis];
-        ray.key[axis] += ray.step[axis];
-        ray.t_max[axis] += ray.t_delta[axis];
-        ray.remaining -= 1;
+        if key[1] != stop[1] && (axis == 3 || t_max[1] < t) {
+            (axis, t) = (1, t_max[1]);
+        }
+        if key[2] != stop[2] && (axis == 3 || t_max[2] < t) {
+            axis = 2;
+        }
+        let crossed_block = match axis {
+            0 => step_axis::<0>(&mut key, &mut t_max, &step, &t_delta),
+            1 => step_axis::<1>(&mut key, &mut t_max, &step, &t_delta),
+            _ => step_axis::<2>(&mut key, &mut t_max, &step, &t_delta),
+        };
+        remaining -= 1;
         visited += 1;
         if S::SKIPS {
-            if (ray.key[axis] >> BLOCK_SHIFT) != (before >> BLOCK_SHIFT) {
-                here = ray.enter_block(mask);
+            if crossed_block {
+                (here, base) = enter(&mut key, &mut t_max, &mut remaining);
             }
-            if here & voxel_bit(&ray.key) == 0 {
+            if here & voxel_bit(&key) == 0 {
                 continue;
             }
         }
-        f(VoxelKey(ray.key), ray.remaining);
+        f(VoxelKey(key), remaining, rank(here, base, &key));
     }
     Some((visited, VoxelKey(stop)))
+}
+
+/// One step of the walk along axis `A`; whether it entered another block.
+#[inline(always)]
+fn step_axis<const A: usize>(key: &mut [i32; 3], t_max: &mut [f64; 3], step: &[i32; 3], t_delta: &[f64; 3]) -> bool {
+    let before = key[A];
+    key[A] += step[A];
+    t_max[A] += t_delta[A];
+    (key[A] >> BLOCK_SHIFT) != (before >> BLOCK_SHIFT)
 }
 
 /// The state of [`walk`]'s Amanatides-Woo traversal: the current and the
@@ -325,9 +407,9 @@ impl Dda {
     /// the walk goes on in. An empty block is left by jumping over the
     /// empty blocks ahead ([`Dda::jump_empty`]); the block returned is
     /// then 0 only if it is the endpoint's own, walked but not reported.
-    fn enter_block<S: Skip>(&mut self, mask: &S) -> u64 {
+    fn enter_block<S: Skip>(&mut self, mask: &S) -> (u64, u32) {
         let here = mask.block_voxels(&block_of(&self.key));
-        if here != 0 {
+        if here.0 != 0 {
             return here;
         }
         self.jump_empty(mask);
@@ -345,7 +427,7 @@ impl Dda {
     fn jump_empty<S: Skip>(&mut self, mask: &S) {
         let Dda { key, stop, step, t_max, t_delta, remaining } = self;
         let stop_block = block_of(stop);
-        let mut block = block_of(key);
+        let block = block_of(key);
         if *remaining == 0 || block == stop_block {
             return;
         }
@@ -359,27 +441,49 @@ impl Dda {
             }
         }
         let block_delta = t_delta.map(|d| d * (1 << BLOCK_SHIFT) as f64);
+        // Per-axis scalars, not arrays indexed by the axis: an element
+        // store followed by the whole array's load (the comparison with
+        // the endpoint's block) defeats store-to-load forwarding, and the
+        // stall was a third of this loop's time.
+        let [mut b0, mut b1, mut b2] = block;
+        let [mut t0, mut t1, mut t2] = t_block;
+        let [s0, s1, s2] = stop_block;
         let mut t_enter;
         let mut entered;
         loop {
             // Ties to the lower axis, as in the walk.
-            let mut e = usize::MAX;
-            for a in 0..3 {
-                if block[a] != stop_block[a] && (e == usize::MAX || t_block[a] < t_block[e]) {
-                    e = a;
+            let (mut e, mut t) = (3usize, f64::INFINITY);
+            if b0 != s0 {
+                (e, t) = (0, t0);
+            }
+            if b1 != s1 && (e == 3 || t1 < t) {
+                (e, t) = (1, t1);
+            }
+            if b2 != s2 && (e == 3 || t2 < t) {
+                (e, t) = (2, t2);
+            }
+            match e {
+                0 => {
+                    b0 += step[0];
+                    t0 += block_delta[0];
                 }
+                1 => {
+                    b1 += step[1];
+                    t1 += block_delta[1];
+                }
+                2 => {
+                    b2 += step[2];
+                    t2 += block_delta[2];
+                }
+                _ => return,
             }
-            if e == usize::MAX {
-                return;
-            }
-            t_enter = t_block[e];
+            t_enter = t;
             entered = e;
-            block[e] += step[e];
-            t_block[e] += block_delta[e];
-            if block == stop_block || !mask.is_empty_block(&block) {
+            if (b0 == s0 && b1 == s1 && b2 == s2) || !mask.is_empty_block(&[b0, b1, b2]) {
                 break;
             }
         }
+        let block = [b0, b1, b2];
         for a in 0..3 {
             if step[a] == 0 {
                 continue;
@@ -434,7 +538,8 @@ pub fn cast_ray(
 
 /// [`cast_ray`] over the voxels of interest only: the same hit, and of the
 /// same free voxels those `mask` holds; its empty blocks are jumped over
-/// (see [`BlockMask`]).
+/// (see [`BlockMask`]). The tests' view of [`cast_ray_ranked`].
+#[cfg(test)]
 pub fn cast_ray_masked(
     origin_m: &[f64; 3],
     end_m: &[f64; 3],
@@ -442,12 +547,29 @@ pub fn cast_ray_masked(
     mask: &BlockMask,
     mut on_free: impl FnMut(VoxelKey),
 ) -> Option<VoxelKey> {
-    walk(origin_m, end_m, voxel_m, mask, |k, remaining| {
+    cast_ray_ranked(origin_m, end_m, voxel_m, mask, |k, _| on_free(k)).map(|(hit, _)| hit)
+}
+
+/// [`cast_ray_masked`] with each voxel's [`BlockMask::rank_of`]: `on_free`
+/// gets the rank of each free voxel, and the hit comes with its rank when
+/// it is of interest. The walk knows the rank from the block it is in, so
+/// tables with one entry per voxel of interest need no lookup.
+pub fn cast_ray_ranked(
+    origin_m: &[f64; 3],
+    end_m: &[f64; 3],
+    voxel_m: f64,
+    mask: &BlockMask,
+    mut on_free: impl FnMut(VoxelKey, u32),
+) -> Option<(VoxelKey, Option<u32>)> {
+    let mut hit_rank = None;
+    walk(origin_m, end_m, voxel_m, mask, |k, remaining, rank| {
         if remaining >= 2 {
-            on_free(k)
+            on_free(k, rank)
+        } else if remaining == 0 {
+            hit_rank = Some(rank)
         }
     })
-    .map(|(_, hit)| hit)
+    .map(|(_, hit)| (hit, hit_rank))
 }
 
 #[cfg(test)]
@@ -547,6 +669,40 @@ mod tests {
         }
     }
 
+    /// `any_in_box` visits exactly the voxels of interest in the box, each
+    /// with its rank.
+    #[test]
+    fn any_in_box_visits_the_box_voxels_of_interest_with_their_ranks() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let keys: Vec<[i32; 3]> = (0..4000).map(|_| std::array::from_fn(|_| rng.random_range(-20..20))).collect();
+        let mask = BlockMask::new([-20; 3], [19; 3], keys.iter().copied(), u64::MAX).unwrap();
+        let set: BTreeSet<[i32; 3]> = keys.iter().copied().collect();
+        for _ in 0..300 {
+            let c: [i32; 3] = std::array::from_fn(|_| rng.random_range(-22..22));
+            let r = rng.random_range(0..4);
+            let (lo, hi) = (c.map(|x| x - r), c.map(|x| x + r + rng.random_range(0..2)));
+            let mut got = Vec::new();
+            assert!(!mask.any_in_box(lo, hi, |k, rank| {
+                got.push((k, rank));
+                false
+            }));
+            got.sort_unstable();
+            let mut want = Vec::new();
+            for z in lo[2]..=hi[2] {
+                for y in lo[1]..=hi[1] {
+                    for x in lo[0]..=hi[0] {
+                        if set.contains(&[x, y, z]) {
+                            want.push(([x, y, z], mask.rank_of(&[x, y, z]).unwrap()));
+                        }
+                    }
+                }
+            }
+            want.sort_unstable();
+            assert_eq!(got, want, "box {lo:?}..={hi:?}");
+        }
+    }
+
     /// The masked cast against the full one with its free voxels filtered
     /// to the voxels of interest: same hit, same frees, same order.
     fn check_masked(o: [f64; 3], e: [f64; 3], v: f64, occupied: &[[i32; 3]]) {
@@ -563,6 +719,17 @@ mod tests {
         let hit_masked = cast_ray_masked(&o, &e, v, &mask, |k| got.push(k));
         assert_eq!(hit_masked, hit, "{o:?} → {e:?} at {v}");
         assert_eq!(got, want, "{o:?} → {e:?} at {v}");
+        // The ranks the walk hands out are the mask's own.
+        let mut ranked = Vec::new();
+        let hit_ranked = cast_ray_ranked(&o, &e, v, &mask, |k, r| ranked.push((k, r as usize)));
+        let want_ranked: Vec<(VoxelKey, usize)> = want.iter().map(|k| (*k, mask.rank_of(&k.0).unwrap())).collect();
+        assert_eq!(ranked, want_ranked, "{o:?} → {e:?} at {v}");
+        assert_eq!(hit_ranked.map(|(k, _)| k), hit);
+        assert_eq!(
+            hit_ranked.and_then(|(_, r)| r.map(|r| r as usize)),
+            hit.and_then(|k| mask.rank_of(&k.0)),
+            "the hit's rank exactly when it is of interest"
+        );
     }
 
     proptest! {
