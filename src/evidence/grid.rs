@@ -9,8 +9,10 @@
 //! crossed (≈1.7 M per SemanticKITTI scan at 0.2 m, ≈250 MB with f64 stats).
 //!
 //! Per keyframe:
-//! 1. cast every ray and set 2 bits (hit, free) per voxel in a dense bitmap
-//!    over the keyframe's ray box clipped to the interest set's box; bits of
+//! 1. cast every ray and set 2 bits (hit, free) per voxel of interest
+//!    inside the keyframe's ray box (clipped to the interest set's box), by
+//!    the voxel's rank in the mask below (`RankMarks`; where the set is
+//!    too wide for a mask, a dense bitmap over the box, `Marks`); bits of
 //!    threads meet through atomic `or`s, which commute, so the order rays are
 //!    cast in does not matter (rays run in parallel); a ray that ends at the
 //!    ground frees nothing within the clearance above its end. Rays walk
@@ -28,8 +30,9 @@
 //!    map voxels whose direction returned nothing, once, whatever else
 //!    freed them (pass 2 leaves those rows alone).
 //!
-//! The bitmap's pages are zeroed lazily by the OS (`Box::new_zeroed_slice`),
-//! so a keyframe only pays for the pages its rays touch.
+//! The box bitmap's pages are zeroed lazily by the OS, so a keyframe only
+//! pays for the pages its rays touch; the rank bitmap is small enough
+//! (2 bits per voxel of interest) to stay in cache.
 
 use super::ground::GroundLevel;
 use super::no_return::NoReturn;

@@ -40,7 +40,7 @@ const NO_GROUND: i32 = i32::MAX;
 /// The lowest occupied key z of every (x, y) key column.
 ///
 /// Dense over the keys' (x, y) bounds where they fit
-/// [`DENSE_MAX_COLUMNS`]: every downward ray looks its endpoint's column
+/// `DENSE_MAX_COLUMNS`: every downward ray looks its endpoint's column
 /// up, and a scan's consecutive rays end in neighbouring columns, which a
 /// grid keeps on the same cache lines where a hash map scatters them (on
 /// SemanticKITTI 08 the hash probe was an eighth of the ray casting).

@@ -286,7 +286,14 @@ impl Skip for BlockMask {
 /// Tried and dropped: setting `t_max = ∞` on the axes that reached the
 /// endpoint's key, so that the axis choice is a plain minimum without the
 /// `key != stop` tests. Same results, no faster (SemanticKITTI 04's evidence
-/// step 1.17-1.23 s before, 1.21-1.29 s after, alternating runs).
+/// step 1.17-1.23 s before, 1.21-1.29 s after, alternating runs). Also
+/// dropped, on `examples/dor_probe` (medians of alternating runs, ray
+/// casting): a bit per 4×4×4 blocks read before a block's own bit in
+/// [`Dda::jump_empty`] (SemanticKITTI 08 0.555 → 0.530 s, a simulated
+/// HDL-64E session 2.06 → 2.27 s: noise, not a gain); leaving such an
+/// empty super-block in one step (SemanticKITTI 04 0.49 → 0.53 s, 08
+/// 0.47 → 0.555 s: slower); and `present` laid out in 4×4×4-block tiles
+/// of one word each (08: 0.49 → 0.53 s).
 fn walk<S: Skip>(
     origin_m: &[f64; 3],
     end_m: &[f64; 3],
