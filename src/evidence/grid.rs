@@ -12,7 +12,8 @@
 //! 1. cast every ray and set 2 bits (hit, free) per voxel of interest
 //!    inside the keyframe's ray box (clipped to the interest set's box), by
 //!    the voxel's rank in the mask below (`RankMarks`; where the set is
-//!    too wide for a mask, a dense bitmap over the box, `Marks`); bits of
+//!    too wide for a mask, a dense bitmap over the box, `Marks`; one
+//!    per-ray loop and one pass 2 serve both through `MarkLayout`); bits of
 //!    threads meet through atomic `or`s, which commute, so the order rays are
 //!    cast in does not matter (rays run in parallel); a ray that ends at the
 //!    ground frees nothing within the clearance above its end. Rays walk
@@ -230,12 +231,6 @@ struct KeyframeMarks<M> {
     band: Option<M>,
 }
 
-/// Where one keyframe's marks are: both kinds of [`KeyframeMarks`].
-enum AnyMarks {
-    Rank(KeyframeMarks<RankMarks>),
-    Box(KeyframeMarks<Marks>),
-}
-
 impl Marks {
     pub(super) fn new(b: Box3) -> Marks {
         let dims = b.dims();
@@ -386,6 +381,293 @@ impl RankMarks {
                 && self.get(rank) & HIT != 0
                 && !(n[2] < k[2] && ground.is_some_and(|g| g.at_ground(&n) == Some(true)))
         })
+    }
+}
+
+/// How one keyframe's marks are laid out, and how its rays and
+/// [`RowsMut::apply`] reach them: by voxel of interest where the interest
+/// set has a mask ([`ByRank`], the usual case), by place in the ray box
+/// where it has none ([`ByBox`]). One per-ray loop ([`mark_rays`]) and one
+/// pass 2 serve both; each is compiled per layout, so the trait costs the
+/// hot loops nothing.
+trait MarkLayout: Sync {
+    /// Where a voxel is in the marks: its mask rank, or its key.
+    type Slot: Copy;
+    type Marks: Sync;
+    /// Empty marks for a keyframe whose ray box is `b`.
+    fn marks(&self, b: &Box3) -> Self::Marks;
+    /// Casts the ray from `origin_m` to `end_m`: `on_free` gets each voxel
+    /// it frees with its slot, and the hit voxel comes back with its slot
+    /// where it has one (the rank layout has none for a hit not of
+    /// interest).
+    fn cast(
+        &self,
+        origin_m: &[f64; 3],
+        end_m: &[f64; 3],
+        voxel_m: f64,
+        on_free: impl FnMut(VoxelKey, Self::Slot),
+    ) -> Option<(VoxelKey, Option<Self::Slot>)>;
+    fn mark(marks: &Self::Marks, slot: Self::Slot, kind: u64);
+    /// The kinds marked at row `i`, whose key `k` is inside the ray box.
+    fn get(&self, marks: &Self::Marks, i: usize, k: &[i32; 3]) -> u64;
+    /// Whether a voxel within `r` (Chebyshev) of `k`, other than `k` and
+    /// inside the ray box `b`, is marked hit; with `ground`, hits below `k`
+    /// at their column's ground level do not count.
+    fn hit_near(&self, marks: &Self::Marks, k: &[i32; 3], r: i32, b: &Box3, ground: Option<&GroundLevel>) -> bool;
+}
+
+/// Marks by the rank of the voxel in the interest set's mask
+/// ([`RankMarks`]); `ranks` is each row's rank ([`KeyIndex::ranks`]).
+struct ByRank<'a> {
+    mask: &'a BlockMask,
+    ranks: &'a [u32],
+}
+
+impl MarkLayout for ByRank<'_> {
+    type Slot = u32;
+    type Marks = RankMarks;
+
+    fn marks(&self, _: &Box3) -> RankMarks {
+        RankMarks::new(self.mask.count())
+    }
+
+    #[inline]
+    fn cast(
+        &self,
+        origin_m: &[f64; 3],
+        end_m: &[f64; 3],
+        voxel_m: f64,
+        on_free: impl FnMut(VoxelKey, u32),
+    ) -> Option<(VoxelKey, Option<u32>)> {
+        cast_ray_ranked(origin_m, end_m, voxel_m, self.mask, on_free)
+    }
+
+    #[inline]
+    fn mark(marks: &RankMarks, rank: u32, kind: u64) {
+        marks.mark(rank, kind)
+    }
+
+    #[inline]
+    fn get(&self, marks: &RankMarks, i: usize, _: &[i32; 3]) -> u64 {
+        marks.get(self.ranks[i] as usize)
+    }
+
+    fn hit_near(&self, marks: &RankMarks, k: &[i32; 3], r: i32, b: &Box3, ground: Option<&GroundLevel>) -> bool {
+        marks.hit_near(k, r, b, self.mask, ground)
+    }
+}
+
+/// Marks by place in the keyframe's ray box ([`Marks`]), for interest sets
+/// too wide for a mask; rays then visit every voxel.
+struct ByBox;
+
+impl MarkLayout for ByBox {
+    type Slot = VoxelKey;
+    type Marks = Marks;
+
+    fn marks(&self, b: &Box3) -> Marks {
+        Marks::new(*b)
+    }
+
+    #[inline]
+    fn cast(
+        &self,
+        origin_m: &[f64; 3],
+        end_m: &[f64; 3],
+        voxel_m: f64,
+        mut on_free: impl FnMut(VoxelKey, VoxelKey),
+    ) -> Option<(VoxelKey, Option<VoxelKey>)> {
+        cast_ray(origin_m, end_m, voxel_m, |k| on_free(k, k)).map(|k| (k, Some(k)))
+    }
+
+    #[inline]
+    fn mark(marks: &Marks, k: VoxelKey, kind: u64) {
+        marks.mark(k, kind)
+    }
+
+    #[inline]
+    fn get(&self, marks: &Marks, _: usize, k: &[i32; 3]) -> u64 {
+        marks.get(k)
+    }
+
+    fn hit_near(&self, marks: &Marks, k: &[i32; 3], r: i32, _: &Box3, ground: Option<&GroundLevel>) -> bool {
+        marks.hit_near(k, r, ground)
+    }
+}
+
+/// One keyframe's rays: where the sensor is, and what a ray frees (the
+/// clearance above a ground end, the surface shapes).
+struct KeyframeRays<'a> {
+    origin_m: &'a [f64; 3],
+    keyframe: u32,
+    voxel_m: f64,
+    cfg: &'a EvidenceConfig,
+    shapes: Option<&'a SurfaceShapes>,
+    /// The session's ground level, where the clearance applies near the
+    /// ground only (`EvidenceConfig::clearance_near_ground_only`).
+    clearance_ground: Option<&'a GroundLevel>,
+}
+
+impl KeyframeRays<'_> {
+    /// The lowest key z the frees of a ray to `p` may reach above a ground
+    /// end, under `free_clearance_m` and under `vacated_clearance_m`.
+    ///
+    /// Free voxels of a downward ray that ends at the ground stop
+    /// `free_clearance_m` above its endpoint (centre z ≥ z_min ⇔ key z ≥
+    /// kz_min). The ground level is looked up only for rays that drop
+    /// enough to need it.
+    fn clearances(&self, p: &[f64; 3]) -> (i32, i32) {
+        let (v, cfg) = (self.voxel_m, self.cfg);
+        let ground_ray = p[2] < self.origin_m[2] - CLEARANCE_MIN_DROP_M
+            && self.clearance_ground.is_none_or(|g| voxel_key(p, v).is_none_or(|k| g.at_ground(&k.0).unwrap_or(true)));
+        let kz_above = |clearance_m: f64| {
+            if ground_ray && clearance_m > 0.0 {
+                ((p[2] + clearance_m) / v - 0.5).ceil().clamp(i32::MIN as f64, i32::MAX as f64) as i32
+            } else {
+                i32::MIN
+            }
+        };
+        (kz_above(cfg.free_clearance_m), kz_above(cfg.vacated_clearance_m))
+    }
+
+    /// Whether the ray to `p` frees voxel `k` (`Some(true)`), frees it only
+    /// under the lower clearance (`Some(false)`), or not at all; `kz` from
+    /// [`Self::clearances`]. A voxel with a shape frees only where the ray
+    /// crosses it (evidence::surface).
+    #[inline]
+    fn frees(&self, k: &VoxelKey, p: &[f64; 3], (kz_min, kz_band): (i32, i32)) -> Option<bool> {
+        match self.shapes.and_then(|shapes| shapes.at(&k.0)) {
+            Some(s) => ((s.clearance_exempt || k.0[2] >= kz_min) && s.passes(k.0, self.voxel_m, self.origin_m, p))
+                .then_some(true),
+            None if k.0[2] >= kz_min => Some(true),
+            None => (k.0[2] >= kz_band).then_some(false),
+        }
+    }
+}
+
+/// Pass 1: casts every ray of a keyframe, in parallel, and marks its hit
+/// and free voxels of interest inside the ray box `b` (with `banded`, the
+/// frees only the lower clearance allows apart). Returns the rays cast.
+fn mark_rays<L: MarkLayout>(
+    layout: &L,
+    rays: &KeyframeRays<'_>,
+    b: Box3,
+    banded: bool,
+    points_m: &[[f64; 3]],
+) -> (usize, KeyframeMarks<L::Marks>) {
+    let marks = KeyframeMarks { b, all: layout.marks(&b), band: banded.then(|| layout.marks(&b)) };
+    let cast = points_m
+        .par_iter()
+        .with_min_len(2048)
+        .map(|p| {
+            let kz = rays.clearances(p);
+            let on_free = |k: VoxelKey, slot: L::Slot| {
+                if !b.contains(&k.0) {
+                    return;
+                }
+                match (rays.frees(&k, p, kz), &marks.band) {
+                    (Some(true), _) => L::mark(&marks.all, slot, FREE),
+                    (Some(false), Some(band)) => L::mark(band, slot, FREE),
+                    _ => {}
+                }
+            };
+            let hit = layout.cast(rays.origin_m, p, rays.voxel_m, on_free);
+            if let Some((k, Some(slot))) = hit
+                && b.contains(&k.0)
+            {
+                L::mark(&marks.all, slot, HIT);
+            }
+            hit.is_some() as usize
+        })
+        .sum();
+    (cast, marks)
+}
+
+/// The rows of an [`InterestEvidence`] pass 2 writes, borrowed apart from
+/// its index (which the mark layout borrows).
+struct RowsMut<'a> {
+    keys: &'a [u64],
+    rows: &'a mut [Row],
+    log_odds: &'a mut [f32],
+    unguarded: &'a [u64],
+    ground: Option<&'a GroundLevel>,
+}
+
+impl RowsMut<'_> {
+    /// Pass 2: eq. 4 once per marked interest voxel and kind, on the rows
+    /// inside the ray box but those in `skip` (the no-return beams' rows,
+    /// which [`InterestEvidence::add_free_rows`] frees). Frees next to the
+    /// keyframe's own hits are dropped (the guard), except at unguarded rows
+    /// and at an earlier session's patch
+    /// ([`super::surface::VoxelShape::from_map`]). Returns the hit and free
+    /// voxels added.
+    fn apply<L: MarkLayout>(
+        &mut self,
+        layout: &L,
+        marks: &KeyframeMarks<L::Marks>,
+        rays: &KeyframeRays<'_>,
+        skip: &[u64],
+    ) -> (usize, usize) {
+        let KeyframeRays { origin_m, keyframe, voxel_m: v, cfg, shapes, .. } = *rays;
+        let b = marks.b;
+        let (lo, hi) = if b.is_empty() { (0, 0) } else { b.packed_x_range(self.keys) };
+        let (l_hit, l_miss, l_min, l_max) = cfg.log_odds.log_odds();
+        // The guard's radius: `free_guard_voxels`, widened with range to the
+        // lateral spread `free_guard_deg` makes there.
+        let guard_rad = cfg.free_guard_deg.to_radians();
+        let guard_voxels = |r_m: f64| (cfg.free_guard_voxels as i32).max((r_m * guard_rad / v).ceil() as i32);
+        let ground = self.ground.filter(|_| !cfg.ground_hits_guard);
+        let unguarded = self.unguarded;
+        let self_unguarded = |i: usize| bit_set(unguarded, i);
+        let hit_free = AtomicU64::new(0);
+        self.rows[lo..hi]
+            .par_iter_mut()
+            .zip(self.log_odds[lo..hi].par_iter_mut())
+            .zip(self.keys[lo..hi].par_iter())
+            .enumerate()
+            .with_min_len(4096)
+            .for_each(|(j, ((row, lo_odds), &pk))| {
+                let i = lo + j;
+                if bit_set(skip, i) {
+                    return;
+                }
+                let k = unpack(pk).0;
+                if !b.contains(&k) {
+                    return;
+                }
+                let mut kinds = layout.get(&marks.all, i, &k);
+                if self_unguarded(i) {
+                    kinds |= marks.band.as_ref().map_or(0, |band| layout.get(band, i, &k)) & FREE;
+                }
+                if kinds == 0 {
+                    return;
+                }
+                let guarded = || {
+                    layout.hit_near(&marks.all, &k, guard_voxels(ray_to_centre(VoxelKey(k), origin_m, v).1), &b, ground)
+                        && !self_unguarded(i)
+                        && !shapes.and_then(|s| s.at(&k)).is_some_and(|s| s.from_map)
+                };
+                if kinds & FREE != 0 && (kinds & HIT != 0 || guarded()) {
+                    kinds &= !FREE;
+                    if kinds == 0 {
+                        return;
+                    }
+                }
+                let (u, q) = direction_and_weight(ray_to_centre(VoxelKey(k), origin_m, v), cfg);
+                if kinds & HIT != 0 {
+                    Row::add(&mut row.hit_n, &mut row.hit_q, &mut row.hit_m, q, u);
+                    *lo_odds = (*lo_odds + l_hit).clamp(l_min, l_max);
+                } else {
+                    *lo_odds = (*lo_odds + l_miss).clamp(l_min, l_max);
+                }
+                if kinds & FREE != 0 {
+                    Row::add(&mut row.free_n, &mut row.free_q, &mut row.free_m, q, u);
+                }
+                row.offer_owner(keyframe, q * kinds.count_ones() as f32);
+                hit_free.fetch_add(((kinds & HIT) << 32) | ((kinds & FREE) >> 1), Ordering::Relaxed);
+            });
+        let hf = hit_free.into_inner();
+        ((hf >> 32) as usize, (hf & 0xffff_ffff) as usize)
     }
 }
 
@@ -576,8 +858,9 @@ pub struct KeyIndex {
     mask: Option<BlockMask>,
     /// The index of each key, in the mask's rank order.
     index_of_rank: Vec<u32>,
-    /// The rank of each key, in key order (the inverse of `index_of_rank`).
-    rank_of_index: Vec<u32>,
+    /// The rank of each key, in key order (the inverse of `index_of_rank`),
+    /// built on first use: only the rays' marks read it.
+    ranks: std::sync::OnceLock<Vec<u32>>,
 }
 
 impl KeyIndex {
@@ -588,27 +871,33 @@ impl KeyIndex {
         } else {
             BlockMask::new(bounds.lo, bounds.hi, keys.iter().map(|&k| unpack(k).0), 1 << 28)
         };
-        let (index_of_rank, rank_of_index) = match &mask {
+        let index_of_rank = match &mask {
             Some(mask) => {
                 let mut out = vec![u32::MAX; keys.len()];
-                let mut ranks = vec![u32::MAX; keys.len()];
                 for (i, &k) in keys.iter().enumerate() {
                     if let Some(r) = mask.rank_of(&unpack(k).0) {
                         out[r] = i as u32;
-                        ranks[i] = r as u32;
                     }
                 }
-                (out, ranks)
+                out
             }
-            None => (Vec::new(), Vec::new()),
+            None => Vec::new(),
         };
-        KeyIndex { mask, index_of_rank, rank_of_index }
+        KeyIndex { mask, index_of_rank, ranks: Default::default() }
     }
 
-    /// The [`BlockMask::rank_of`] of key `i` (with a mask).
-    #[inline]
-    fn rank_of_index(&self, i: usize) -> usize {
-        self.rank_of_index[i] as usize
+    /// The [`BlockMask::rank_of`] of each key, in key order (empty without
+    /// a mask).
+    fn ranks(&self) -> &[u32] {
+        self.ranks.get_or_init(|| {
+            let mut ranks = vec![u32::MAX; self.index_of_rank.len()];
+            for (r, &i) in self.index_of_rank.iter().enumerate() {
+                if let Some(slot) = ranks.get_mut(i as usize) {
+                    *slot = r as u32;
+                }
+            }
+            ranks
+        })
     }
 
     /// The keys as a mask, `None` where their bounds are too large for one.
@@ -843,101 +1132,34 @@ impl InterestEvidence {
         let cast = if b.is_empty() {
             points_m.iter().filter(|p| voxel_key(p, v).is_some()).count()
         } else {
-            // Only interest voxels get evidence: rays report only those and
-            // jump over the blocks that hold none.
-            let mask = self.blocks();
+            let InterestEvidence { keys, rows, log_odds, bounds, unguarded, ground, index, .. } = self;
+            let ground = ground.as_deref();
+            let rays = KeyframeRays {
+                origin_m,
+                keyframe,
+                voxel_m: v,
+                cfg,
+                shapes,
+                clearance_ground: ground.filter(|_| cfg.clearance_near_ground_only),
+            };
             // Voxels freed only under the lower clearance of the unguarded
             // (vacated map) voxels.
-            let banded = !self.unguarded.is_empty() && cfg.vacated_clearance_m < cfg.free_clearance_m;
-            let ground = self.ground.as_deref().filter(|_| cfg.clearance_near_ground_only);
-            // Per ray: the lowest key z its frees may reach above a ground
-            // end, under `free_clearance_m` and under `vacated_clearance_m`.
-            let clearances = |p: &[f64; 3]| {
-                // Free voxels of a downward ray that ends at the ground
-                // stop `free_clearance_m` above its endpoint (centre z ≥
-                // z_min ⇔ key z ≥ kz_min). The ground level is looked up
-                // only for rays that drop enough to need it.
-                let ground_ray = p[2] < origin_m[2] - CLEARANCE_MIN_DROP_M
-                    && ground.is_none_or(|g| voxel_key(p, v).is_none_or(|k| g.at_ground(&k.0).unwrap_or(true)));
-                let kz_above = |clearance_m: f64| {
-                    if ground_ray && clearance_m > 0.0 {
-                        ((p[2] + clearance_m) / v - 0.5).ceil().clamp(i32::MIN as f64, i32::MAX as f64) as i32
-                    } else {
-                        i32::MIN
-                    }
-                };
-                (kz_above(cfg.free_clearance_m), kz_above(cfg.vacated_clearance_m))
-            };
-            // Whether a ray to `p` frees voxel `k` (`Some(true)`), frees it
-            // only under the lower clearance (`Some(false)`), or not at all.
-            let frees = |k: &VoxelKey, p: &[f64; 3], (kz_min, kz_band): (i32, i32)| {
-                // A voxel with a shape frees only where the ray crosses it
-                // (evidence::surface).
-                let shape = shapes.and_then(|shapes| shapes.at(&k.0));
-                match shape {
-                    Some(s) => {
-                        ((s.clearance_exempt || k.0[2] >= kz_min) && s.passes(k.0, v, origin_m, p)).then_some(true)
-                    }
-                    None if k.0[2] >= kz_min => Some(true),
-                    None => (k.0[2] >= kz_band).then_some(false),
-                }
-            };
-            let (cast, marks) = match mask {
+            let banded = !unguarded.is_empty() && cfg.vacated_clearance_m < cfg.free_clearance_m;
+            let mut rows = RowsMut { keys, rows, log_odds, unguarded, ground };
+            // Only interest voxels get evidence: with a mask, rays report
+            // only those and jump over the blocks that hold none.
+            let index = index.get_or_init(|| KeyIndex::new(keys, bounds));
+            let (cast, (h, f)) = match index.mask() {
                 Some(mask) => {
-                    let marks = KeyframeMarks {
-                        b,
-                        all: RankMarks::new(mask.count()),
-                        band: banded.then(|| RankMarks::new(mask.count())),
-                    };
-                    let cast: usize = points_m
-                        .par_iter()
-                        .with_min_len(2048)
-                        .map(|p| {
-                            let kz = clearances(p);
-                            let on_free = |k: VoxelKey, rank: u32| {
-                                if !b.contains(&k.0) {
-                                    return;
-                                }
-                                match (frees(&k, p, kz), &marks.band) {
-                                    (Some(true), _) => marks.all.mark(rank, FREE),
-                                    (Some(false), Some(band)) => band.mark(rank, FREE),
-                                    _ => {}
-                                }
-                            };
-                            let hit = cast_ray_ranked(origin_m, p, v, mask, on_free);
-                            if let Some((k, Some(rank))) = hit
-                                && b.contains(&k.0)
-                            {
-                                marks.all.mark(rank, HIT);
-                            }
-                            hit.is_some() as usize
-                        })
-                        .sum();
-                    (cast, AnyMarks::Rank(marks))
+                    let layout = ByRank { mask, ranks: index.ranks() };
+                    let (cast, marks) = mark_rays(&layout, &rays, b, banded, points_m);
+                    (cast, rows.apply(&layout, &marks, &rays, &sky_bits))
                 }
                 None => {
-                    let marks = KeyframeMarks { b, all: Marks::new(b), band: banded.then(|| Marks::new(b)) };
-                    let cast: usize = points_m
-                        .par_iter()
-                        .with_min_len(2048)
-                        .map(|p| {
-                            let kz = clearances(p);
-                            let on_free = |k: VoxelKey| match (frees(&k, p, kz), &marks.band) {
-                                (Some(true), _) => marks.all.mark(k, FREE),
-                                (Some(false), Some(band)) => band.mark(k, FREE),
-                                _ => {}
-                            };
-                            let hit = cast_ray(origin_m, p, v, on_free);
-                            if let Some(k) = hit {
-                                marks.all.mark(k, HIT);
-                            }
-                            hit.is_some() as usize
-                        })
-                        .sum();
-                    (cast, AnyMarks::Box(marks))
+                    let (cast, marks) = mark_rays(&ByBox, &rays, b, banded, points_m);
+                    (cast, rows.apply(&ByBox, &marks, &rays, &sky_bits))
                 }
             };
-            let (h, f) = self.apply(&marks, origin_m, keyframe, cfg, shapes, &sky_bits);
             out.hit_voxels = h;
             out.free_voxels = f;
             cast
@@ -946,13 +1168,6 @@ impl InterestEvidence {
         self.add_free_rows(&sky, origin_m, keyframe, cfg);
         out.no_return_voxels = sky.len();
         out
-    }
-
-    /// The keys as a [`BlockMask`] over the bounds, built once; `None` for
-    /// bounds too large for one ([`KeyIndex`]), whose rays then visit every
-    /// voxel.
-    fn blocks(&self) -> Option<&BlockMask> {
-        self.index().mask()
     }
 
     /// Rows of `nr.candidates` within reach whose direction from the sensor
@@ -995,100 +1210,6 @@ impl InterestEvidence {
             let l = &mut self.log_odds[i as usize];
             *l = (*l + l_miss).clamp(l_min, l_max);
         }
-    }
-
-    /// Pass 2: eq. 4 once per marked interest voxel and kind.
-    /// An earlier session's patch ([`super::surface::VoxelShape::from_map`])
-    /// is freed next to the keyframe's own hits too.
-    fn apply(
-        &mut self,
-        marks: &AnyMarks,
-        origin_m: &[f64; 3],
-        keyframe: u32,
-        cfg: &EvidenceConfig,
-        shapes: Option<&SurfaceShapes>,
-        skip: &[u64],
-    ) -> (usize, usize) {
-        let b = match marks {
-            AnyMarks::Rank(m) => m.b,
-            AnyMarks::Box(m) => m.b,
-        };
-        let (lo, hi) = self.x_range(&b);
-        let v = self.voxel_m;
-        let (l_hit, l_miss, l_min, l_max) = cfg.log_odds.log_odds();
-        // The guard's radius: `free_guard_voxels`, widened with range to the
-        // lateral spread `free_guard_deg` makes there.
-        let guard_rad = cfg.free_guard_deg.to_radians();
-        let guard_voxels = |r_m: f64| (cfg.free_guard_voxels as i32).max((r_m * guard_rad / v).ceil() as i32);
-        let ground = self.ground.as_deref().filter(|_| !cfg.ground_hits_guard);
-        let InterestEvidence { keys, rows, log_odds, unguarded, index, .. } = self;
-        let index = index.get();
-        let mask = index.and_then(|i| i.mask());
-        let keys = &keys[lo..hi];
-        let self_unguarded = |i: usize| bit_set(unguarded, i);
-        // The marks of row `i` (key `k`, inside `b`): all, and the band's.
-        let kinds_of = |i: usize, k: &[i32; 3]| match (marks, index) {
-            (AnyMarks::Rank(m), Some(index)) => {
-                let r = index.rank_of_index(i);
-                (m.all.get(r), m.band.as_ref().map_or(0, |band| band.get(r)))
-            }
-            (AnyMarks::Box(m), _) => (m.all.get(k), m.band.as_ref().map_or(0, |band| band.get(k))),
-            (AnyMarks::Rank(_), None) => unreachable!("rank marks are made from the index's mask"),
-        };
-        let hit_near = |k: &[i32; 3], r: i32| match (marks, mask) {
-            (AnyMarks::Rank(m), Some(mask)) => m.all.hit_near(k, r, &b, mask, ground),
-            (AnyMarks::Box(m), _) => m.all.hit_near(k, r, ground),
-            (AnyMarks::Rank(_), None) => unreachable!("rank marks are made from the index's mask"),
-        };
-        let hit_free = AtomicU64::new(0);
-        rows[lo..hi]
-            .par_iter_mut()
-            .zip(log_odds[lo..hi].par_iter_mut())
-            .zip(keys.par_iter())
-            .enumerate()
-            .with_min_len(4096)
-            .for_each(|(j, ((row, lo_odds), &pk))| {
-                let i = lo + j;
-                if bit_set(skip, i) {
-                    return;
-                }
-                let k = unpack(pk).0;
-                if !b.contains(&k) {
-                    return;
-                }
-                let (mut kinds, band) = kinds_of(i, &k);
-                if self_unguarded(i) {
-                    kinds |= band & FREE;
-                }
-                if kinds == 0 {
-                    return;
-                }
-                let guarded = || {
-                    hit_near(&k, guard_voxels(ray_to_centre(VoxelKey(k), origin_m, v).1))
-                        && !self_unguarded(i)
-                        && !shapes.and_then(|s| s.at(&k)).is_some_and(|s| s.from_map)
-                };
-                if kinds & FREE != 0 && (kinds & HIT != 0 || guarded()) {
-                    kinds &= !FREE;
-                    if kinds == 0 {
-                        return;
-                    }
-                }
-                let (u, q) = direction_and_weight(ray_to_centre(VoxelKey(k), origin_m, v), cfg);
-                if kinds & HIT != 0 {
-                    Row::add(&mut row.hit_n, &mut row.hit_q, &mut row.hit_m, q, u);
-                    *lo_odds = (*lo_odds + l_hit).clamp(l_min, l_max);
-                } else {
-                    *lo_odds = (*lo_odds + l_miss).clamp(l_min, l_max);
-                }
-                if kinds & FREE != 0 {
-                    Row::add(&mut row.free_n, &mut row.free_q, &mut row.free_m, q, u);
-                }
-                row.offer_owner(keyframe, q * kinds.count_ones() as f32);
-                hit_free.fetch_add(((kinds & HIT) << 32) | ((kinds & FREE) >> 1), Ordering::Relaxed);
-            });
-        let hf = hit_free.into_inner();
-        ((hf >> 32) as usize, (hf & 0xffff_ffff) as usize)
     }
 
     /// Adds `other` (a [`subset`](Self::subset) of this set, `idx` from it)
@@ -1330,6 +1451,48 @@ mod tests {
         // Random points in free space: later keyframes' rays pass through
         // earlier endpoints, so some voxels must come out dynamic.
         assert!(dynamic > 0);
+    }
+
+    /// An interest set too wide for a mask is marked by place in the ray box
+    /// (`ByBox`: rays visit every voxel); on the same voxels it gives the
+    /// rows marking by rank gives (`ByRank`), with the own-hit guard, the
+    /// ground level, the clearances and the unguarded rows' band all at work.
+    #[test]
+    fn box_marks_give_the_rows_rank_marks_give() {
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        let cfg = EvidenceConfig::default();
+        assert!(cfg.vacated_clearance_m < cfg.free_clearance_m, "the band must be in play");
+        let frames: Vec<([f64; 3], Vec<[f64; 3]>)> = (0..4)
+            .map(|i| {
+                let o = [i as f64 * 3.0, -0.4 * i as f64, 1.8];
+                let mut p = scan(&mut rng, o, 6000);
+                p.extend((0..3000).map(|_| {
+                    let (a, r) = (rng.random::<f64>() * std::f64::consts::TAU, 1.0 + rng.random::<f64>() * 25.0);
+                    [o[0] + r * a.cos(), o[1] + r * a.sin(), 0.03 * rng.random::<f64>()]
+                }));
+                (o, p)
+            })
+            .collect();
+        let v = cfg.voxel_size_m;
+        let keys: Vec<u64> = frames.iter().flat_map(|(_, p)| p.iter().filter_map(|p| packed_key(p, v))).collect();
+        // 30 km off in x and y: it sorts last, and its bounds need far more
+        // blocks than a mask may have.
+        let far = pack(VoxelKey([150_000, 150_000, 0])).unwrap();
+        let run = |extra: Option<u64>| {
+            let mut ev = InterestEvidence::new(keys.iter().copied().chain(extra).collect(), v);
+            assert_eq!(ev.index().mask().is_some(), extra.is_none());
+            ev.set_ground(GroundLevel::from_keys(keys.iter()));
+            ev.set_unguarded((0..ev.len()).step_by(3));
+            let stats: Vec<RayStats> =
+                frames.iter().enumerate().map(|(i, (o, p))| ev.add_keyframe(o, p, i as u32, &cfg, None)).collect();
+            let n = ev.len() - extra.is_some() as usize;
+            (stats, ev.rows()[..n].to_vec(), ev.log_odds[..n].to_vec())
+        };
+        let (by_rank, by_box) = (run(None), run(Some(far)));
+        assert!(by_rank.0.iter().all(|s| s.hit_voxels > 0 && s.free_voxels > 0), "{:?}", by_rank.0);
+        assert_eq!(by_rank.0, by_box.0);
+        assert_eq!(by_rank.1, by_box.1);
+        assert_eq!(by_rank.2, by_box.2);
     }
 
     /// Parallel rays give the same rows whatever the thread count.
