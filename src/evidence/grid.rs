@@ -610,7 +610,7 @@ impl RowsMut<'_> {
     ) -> (usize, usize) {
         let KeyframeRays { origin_m, keyframe, voxel_m: v, cfg, shapes, .. } = *rays;
         let b = marks.b;
-        let (lo, hi) = if b.is_empty() { (0, 0) } else { b.packed_x_range(self.keys) };
+        let (lo, hi) = b.packed_x_range(self.keys);
         let (l_hit, l_miss, l_min, l_max) = cfg.log_odds.log_odds();
         // The guard's radius: `free_guard_voxels`, widened with range to the
         // lateral spread `free_guard_deg` makes there.
@@ -1082,9 +1082,6 @@ impl InterestEvidence {
 
     /// Indices of the keys whose x lies in the box's x range.
     pub(super) fn x_range(&self, b: &Box3) -> (usize, usize) {
-        if b.is_empty() {
-            return (0, 0);
-        }
         b.packed_x_range(&self.keys)
     }
 
