@@ -379,8 +379,8 @@ def pct(x):
 
 
 def table(results, threads):
-    head = ["dataset", "method", "PR%", "RR%", "F1%", "prec%", "vPR%", "vRR%", "vF1%", "vprec%", "points/s", "time s",
-            "mem pts/s"]
+    head = ["dataset", "method", "PR%", "RR%", "F1%", "prec%", "vPR%", "vRR%", "vF1%", "vprec%", "mRR%", "mF1%",
+            "points/s", "time s", "mem pts/s"]
     rows = []
     notes = []
     checks = []  # (dataset / method, max |Δrate|, same counts)
@@ -390,14 +390,14 @@ def table(results, threads):
             s = r.get("scores")
             tag = " (py)" if r.get("source") == "python selfcheck" else ""
             if s is None:
-                rows.append([d["dataset"], r["method"]] + ["n/a"] * 8 + ["-", "-", "-"])
+                rows.append([d["dataset"], r["method"]] + ["n/a"] * 10 + ["-", "-", "-"])
                 if r.get("skipped"):
                     rows[-1][-3:] = ["skipped", "-", "-"]
                 if r.get("error"):
                     err = "\n      ".join(r["error"].splitlines())
                     notes.append(f"{d['dataset']} / {r['method']}:\n      {err}")
                 continue
-            p, v = s["point"], s["voxel"]
+            p, v, m = s["point"], s["voxel"], s.get("moved") or {}
             pps = r.get("points_per_s")
             # DUFOMap's own time is in memory already (scans preloaded).
             mem = r.get("in_memory_points_per_s", pps)
@@ -409,6 +409,7 @@ def table(results, threads):
                 d["dataset"], r["method"] + tag,
                 pct(p["pr"]), pct(p["rr"]), pct(p["f1"]), pct(p["precision_of_removal"]),
                 pct(v["pr"]), pct(v["rr"]), pct(v["f1"]), pct(v["precision_of_removal"]),
+                pct(m.get("rr")), pct(m.get("f1")),
                 (f"{pps:,.0f}" if pps else "-") + star, f"{t:.2f}" if t is not None else "-",
                 f"{mem:,.0f}" if mem else "-",
             ])
@@ -421,7 +422,8 @@ def table(results, threads):
     lines.insert(1, "-" * len(lines[0]))
     out = "\n".join(lines)
     out += ("\n\nPR/RR/F1/prec: point-wise; vPR..vprec: voxel-wise at 0.2 m (majority vote per voxel). "
-            "prec = precision of removal.\npoints/s and time: seam = wall time of its ingest's evidence step "
+            "prec = precision of removal.\nmRR/mF1: point-wise without the moving-labelled points that stayed "
+            "in place (within one voxel of their own object in another scan; `seam eval dor`'s moved block).\npoints/s and time: seam = wall time of its ingest's evidence step "
             "(reading its scans, ray casting, DOR, writing its files), DUFOMap = run+propagate+segment wall time "
             f"(scans preloaded); {threads if threads > 0 else 'all'} threads each.\nmem pts/s: seam without reading "
             "scans and writing files (the step's `generate_s`: ray casting, evidence, DOR, cleaned map in memory), "

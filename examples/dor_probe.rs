@@ -10,6 +10,13 @@
 //! `EvidenceConfig` fields by their TOML names (e.g. `--set alpha0=0.05
 //! --set model=log_odds`); several `--set` groups separated by `--vs` are run
 //! one after another on the same scans.
+//!
+//! Diagnostics, by environment variable: `DOR_HIST=1` prints ε_l deciles of
+//! static and moving points, `DOR_CLASSES=1` the removed share per semantic
+//! class, `DOR_INSTANCES=1` the removed moving points per instance and
+//! keyframe, and `DOR_DUMP=FILE` writes every point's ε_l (f32, little
+//! endian) followed by its verdict (one byte each), in scan order, for
+//! comparing with another tool's labels point by point.
 
 use seam::eval::dor::{DorAccumulator, render_table};
 use seam::evidence::EvidenceConfig;
@@ -70,6 +77,8 @@ fn run() -> Result<(), String> {
     let mut scans = Vec::new();
     let mut truth = Vec::new();
     let mut classes: Vec<Vec<u16>> = Vec::new();
+    let mut instances: Vec<Vec<u16>> = Vec::new();
+    let mut raw_labels: Vec<Vec<u32>> = Vec::new();
     for (i, kf) in src.keyframes.iter().enumerate() {
         let scan = read_session_scan(&src, i).map_err(|e| e.to_string())?;
         let labels = match &kf.labels_path {
@@ -77,7 +86,9 @@ fn run() -> Result<(), String> {
             None => return Err(format!("{}: keyframe {i} has no labels", dir.display())),
         };
         truth.push(labels.iter().map(|&l| is_moving_label(l)).collect::<Vec<bool>>());
+        raw_labels.push(labels.clone());
         classes.push(labels.iter().map(|&l| (l & 0xffff) as u16).collect());
+        instances.push(labels.iter().map(|&l| (l >> 16) as u16).collect());
         scans.push(scan.points);
     }
     let points: usize = scans.iter().map(Vec::len).sum();
@@ -102,14 +113,15 @@ fn run() -> Result<(), String> {
         let mut row = 0;
         let mut by_class: std::collections::BTreeMap<u16, (usize, usize)> = Default::default();
         for (i, p) in scans.iter().enumerate() {
-            for (j, q) in p.iter().enumerate() {
+            for (j, _) in p.iter().enumerate() {
                 let e = by_class.entry(classes[i][j]).or_default();
                 e.0 += 1;
-                e.1 += out.labels.dynamic[row] as usize;
-                let w = poses[i] * nalgebra::Point3::new(q[0] as f64, q[1] as f64, q[2] as f64);
-                acc.add([w.x, w.y, w.z], truth[i][j], out.labels.dynamic[row]);
-                row += 1;
+                e.1 += out.labels.dynamic[row + j] as usize;
             }
+            let world = seam::geometry::transformed(p, &poses[i]);
+            acc.add_labelled_scan(i as u32, &world, &raw_labels[i], &out.labels.dynamic[row..row + p.len()])
+                .map_err(|e| e.to_string())?;
+            row += p.len();
         }
         let s = acc.finish();
         println!(
@@ -132,6 +144,36 @@ fn run() -> Result<(), String> {
                 }
             }
             println!("  eps_l deciles, static : {:?}\n  eps_l deciles, dynamic: {:?}", h[0], h[1]);
+        }
+        if let Some(path) = std::env::var_os("DOR_DUMP") {
+            // Every point's eps_l (f32) then dynamic (u8), in scan order.
+            let mut bytes: Vec<u8> = out.labels.eps_l.iter().flat_map(|e| e.to_le_bytes()).collect();
+            bytes.extend(out.labels.dynamic.iter().map(|&d| d as u8));
+            std::fs::write(&path, bytes).map_err(|e| e.to_string())?;
+        }
+        if std::env::var_os("DOR_INSTANCES").is_some() {
+            // Moving points by (keyframe, instance): removed of all.
+            let mut by_inst: std::collections::BTreeMap<(u16, usize), (usize, usize)> = Default::default();
+            let mut row = 0;
+            for (i, t) in truth.iter().enumerate() {
+                for (j, &d) in t.iter().enumerate() {
+                    if d {
+                        let e = by_inst.entry((instances[i][j], i)).or_default();
+                        e.0 += 1;
+                        e.1 += out.labels.dynamic[row] as usize;
+                    }
+                    row += 1;
+                }
+            }
+            let mut last = None;
+            for ((inst, kf), (n, r)) in &by_inst {
+                if last != Some(*inst) {
+                    print!("\n  moving instance {inst:>3}:");
+                    last = Some(*inst);
+                }
+                print!(" kf{kf} {r}/{n}");
+            }
+            println!();
         }
         if std::env::var_os("DOR_CLASSES").is_some() {
             for (c, (n, r)) in &by_class {

@@ -41,12 +41,20 @@ fn dor_scores(seq_dir: &Path, tmp: &Path, name: &str, toml: &str) -> Value {
         "{name}: evidence step {step_s:?} s, in memory {in_memory_s:?} s"
     );
     let p = v["scores"]["point"].clone();
+    // The moved block: the same static points, fewer moving ones (those
+    // that stood still are left out).
+    let m = &v["scores"]["moved"];
+    assert_eq!(m["static_total"], p["static_total"], "{name}: {m}");
+    assert!(f(m, "dynamic_total") <= f(&p, "dynamic_total") && f(m, "dynamic_total") > 0.0, "{name}: {m}");
     eprintln!(
-        "{name}: PR {:.2} RR {:.2} F1 {:.2} %",
-        100.0 * p["pr"].as_f64().unwrap(),
-        100.0 * p["rr"].as_f64().unwrap(),
-        100.0 * p["f1"].as_f64().unwrap()
+        "{name}: PR {:.2} RR {:.2} F1 {:.2} %, RR of the movers that moved {:.2} %",
+        100.0 * f(&p, "pr"),
+        100.0 * f(&p, "rr"),
+        100.0 * f(&p, "f1"),
+        100.0 * f(m, "rr")
     );
+    let mut p = p;
+    p["moved_rr"] = m["rr"].clone();
     p
 }
 
@@ -66,6 +74,10 @@ fn semantickitti_dor_keeps_static_structure_and_removes_movers() {
         let seam = dor_scores(&dir, tmp.path(), &format!("kitti{seq}"), "");
         assert!(f(&seam, "pr") >= 0.99, "{seq}: static points kept {seam}");
         assert!(f(&seam, "f1") >= f1_floor, "{seq}: F1 below {f1_floor}: {seam}");
+        // Measured 90.2 and 80.4 %: most of 08's moving points belong to
+        // two cars that stay within a voxel of their place for all ten
+        // scans; of the movers that left their place, most are removed.
+        assert!(f(&seam, "moved_rr") >= 0.75, "{seq}: movers that moved, removed: {seam}");
         // Every point of every scan got a verdict.
         let points: u64 =
             std::fs::read_dir(dir.join("velodyne")).unwrap().map(|e| e.unwrap().metadata().unwrap().len() / 16).sum();

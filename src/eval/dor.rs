@@ -27,6 +27,16 @@
 //! precision of removal = removed-and-dynamic / removed
 //! ```
 //!
+//! A third block, `moved`, is there when the points came with their raw
+//! labels ([`DorAccumulator::add_labelled_scan`]): point-wise, without the
+//! moving-labelled points that did not move during the sequence. A moving
+//! point is *still* when a point of the same instance (label bits 16-31) in
+//! another scan lies in its voxel or one of the 26 around it; SemanticKITTI
+//! and the simulator label an object moving for the whole sequence even
+//! while it waits at a crossing, and no method that removes only space some
+//! ray saw empty can remove an object that never left its place. PR is the
+//! point block's; RR is over the moving points that moved.
+//!
 //! A ratio whose denominator is zero is `None` (JSON `null`), never NaN: no
 //! static points → PR, SA, F1, HA, AA are `None`; no dynamic points → RR, DA,
 //! F1, HA, AA are `None`; nothing removed → precision of removal is `None`.
@@ -180,6 +190,19 @@ pub struct DorScores {
     pub voxel_m: f64,
     pub point: DorBlock,
     pub voxel: DorBlock,
+    /// Point-wise without the still movers (module docs); `None` unless
+    /// every scan came with its raw labels.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub moved: Option<DorBlock>,
+}
+
+/// A moving point kept for the `moved` block.
+#[derive(Debug, Clone, Copy)]
+struct MoverPoint {
+    key: [i32; 3],
+    instance: u16,
+    keyframe: u32,
+    removed: bool,
 }
 
 /// Per voxel: points truly dynamic, points removed, all points.
@@ -206,6 +229,9 @@ pub struct DorAccumulator {
     voxel_m: f64,
     points: Counts,
     voxels: FxHashMap<[i32; 3], VoxelTally>,
+    /// Moving points of labelled scans; `None` once an unlabelled scan was
+    /// added (the `moved` block then cannot be scored).
+    movers: Option<Vec<MoverPoint>>,
 }
 
 impl DorAccumulator {
@@ -213,7 +239,7 @@ impl DorAccumulator {
     /// [`DOR_VOXEL_M`]). Panics unless `voxel_m` is finite and positive.
     pub fn new(voxel_m: f64) -> Self {
         assert!(voxel_m.is_finite() && voxel_m > 0.0, "DOR voxel size must be finite and > 0, got {voxel_m}");
-        DorAccumulator { voxel_m, points: Counts::default(), voxels: FxHashMap::default() }
+        DorAccumulator { voxel_m, points: Counts::default(), voxels: FxHashMap::default(), movers: Some(Vec::new()) }
     }
 
     /// The voxel key of a world position: `floor(p / voxel_m)` per axis.
@@ -222,8 +248,16 @@ impl DorAccumulator {
     }
 
     /// One point: its world position, whether it is truly dynamic, whether
-    /// the method removed it.
+    /// the method removed it. Without its label, the `moved` block is not
+    /// scored.
     pub fn add(&mut self, p_world: [f64; 3], dynamic: bool, removed: bool) {
+        if dynamic {
+            self.movers = None;
+        }
+        self.tally(p_world, dynamic, removed);
+    }
+
+    fn tally(&mut self, p_world: [f64; 3], dynamic: bool, removed: bool) {
         self.points.add(dynamic, removed);
         let t = self.voxels.entry(self.voxel_key(p_world)).or_default();
         t.dynamic += u32::from(dynamic);
@@ -248,6 +282,67 @@ impl DorAccumulator {
         Ok(())
     }
 
+    /// A whole scan with its raw labels (class and instance), so that the
+    /// `moved` block is scored too; `keyframe` tells scans apart.
+    pub fn add_labelled_scan(
+        &mut self,
+        keyframe: u32,
+        p_world: &[[f64; 3]],
+        labels: &[u32],
+        removed: &[bool],
+    ) -> Result<(), EvalError> {
+        if p_world.len() != labels.len() || p_world.len() != removed.len() {
+            return Err(EvalError::Mismatch(format!(
+                "DOR scoring got {} points, {} labels and {} removal flags; they must be one per point",
+                p_world.len(),
+                labels.len(),
+                removed.len()
+            )));
+        }
+        self.voxels.reserve(p_world.len() / 4);
+        for ((p, &l), &r) in p_world.iter().zip(labels).zip(removed) {
+            let dynamic = is_moving_label(l);
+            self.tally(*p, dynamic, r);
+            if dynamic && let Some(m) = self.movers.as_mut() {
+                m.push(MoverPoint {
+                    key: p.map(|c| (c / self.voxel_m).floor() as i32),
+                    instance: (l >> 16) as u16,
+                    keyframe,
+                    removed: r,
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// The `moved` block: the point block less the still movers.
+    fn moved_block(&self) -> Option<DorBlock> {
+        let movers = self.movers.as_ref()?;
+        // Per (instance, voxel): the first keyframe seen there, and whether
+        // another one was too.
+        let mut seen: FxHashMap<(u16, [i32; 3]), (u32, bool)> = FxHashMap::default();
+        for m in movers {
+            seen.entry((m.instance, m.key)).and_modify(|e| e.1 |= e.0 != m.keyframe).or_insert((m.keyframe, false));
+        }
+        let mut counts = self.points;
+        counts.dynamic_total = 0;
+        counts.dynamic_removed = 0;
+        for m in movers {
+            let still = (-1..=1).any(|dx| {
+                (-1..=1).any(|dy| {
+                    (-1..=1).any(|dz| {
+                        let k = [m.key[0] + dx, m.key[1] + dy, m.key[2] + dz];
+                        seen.get(&(m.instance, k)).is_some_and(|&(first, other)| other || first != m.keyframe)
+                    })
+                })
+            });
+            if !still {
+                counts.add(true, m.removed);
+            }
+        }
+        Some(counts.block())
+    }
+
     /// Adds everything `other` has seen (for per-thread accumulators).
     /// Panics if the voxel sizes differ.
     pub fn merge(&mut self, other: DorAccumulator) {
@@ -257,6 +352,10 @@ impl DorAccumulator {
         a.dynamic_total += b.dynamic_total;
         a.static_kept += b.static_kept;
         a.dynamic_removed += b.dynamic_removed;
+        match (self.movers.as_mut(), other.movers) {
+            (Some(a), Some(b)) => a.extend(b),
+            _ => self.movers = None,
+        }
         for (k, v) in other.voxels {
             let t = self.voxels.entry(k).or_default();
             t.dynamic += v.dynamic;
@@ -277,7 +376,7 @@ impl DorAccumulator {
             // Majority with ties to dynamic / removed (module docs).
             voxel.add(2 * t.dynamic >= t.total, 2 * t.removed >= t.total);
         }
-        DorScores { voxel_m: self.voxel_m, point: self.points.block(), voxel: voxel.block() }
+        DorScores { voxel_m: self.voxel_m, point: self.points.block(), voxel: voxel.block(), moved: self.moved_block() }
     }
 }
 
@@ -316,7 +415,10 @@ pub fn render_table(s: &DorScores) -> String {
             b.removed_total.to_string(),
         ]
     };
-    let rows = [row("point".into(), &s.point), row(format!("voxel {} m", s.voxel_m), &s.voxel)];
+    let mut rows = vec![row("point".into(), &s.point), row(format!("voxel {} m", s.voxel_m), &s.voxel)];
+    if let Some(m) = &s.moved {
+        rows.push(row("moved".into(), m));
+    }
     let widths: Vec<usize> =
         (0..head.len()).map(|i| rows.iter().map(|r| r[i].len()).chain([head[i].len()]).max().unwrap_or(0)).collect();
     let line = |cells: &[String]| -> String {
@@ -516,6 +618,83 @@ mod tests {
         }
         a.merge(b);
         assert_eq!(a.finish(), one.finish());
+    }
+
+    /// One labelled scan: keyframe, world points, raw labels, removed flags.
+    type Scan = (u32, Vec<[f64; 3]>, Vec<u32>, Vec<bool>);
+
+    /// Instance 1 stands (its points in both scans share a voxel or touch
+    /// one), instance 2 drives 2 m between the scans; a static point too.
+    fn two_scans() -> Vec<Scan> {
+        let standing = 252 | (1 << 16);
+        let driving = 252 | (2 << 16);
+        vec![
+            (
+                0,
+                vec![[0.05, 0.05, 0.05], [5.05, 0.05, 0.05], [9.0, 9.0, 0.0]],
+                vec![standing, driving, 40],
+                vec![false, true, false],
+            ),
+            // The standing object's point is one voxel over (a neighbour):
+            // still. The driving one is 2 m on: moved.
+            (
+                1,
+                vec![[0.25, 0.05, 0.05], [7.05, 0.05, 0.05], [9.0, 9.0, 0.0]],
+                vec![standing, driving, 40],
+                vec![true, false, true],
+            ),
+        ]
+    }
+
+    #[test]
+    fn moved_block_leaves_out_movers_that_stayed_in_place() {
+        let mut acc = DorAccumulator::new(0.2);
+        for (kf, p, l, r) in two_scans() {
+            acc.add_labelled_scan(kf, &p, &l, &r).unwrap();
+        }
+        let s = acc.finish();
+        assert_eq!(s.point.dynamic_total, 4);
+        assert_eq!(s.point.dynamic_removed, 2);
+        let m = s.moved.clone().expect("labelled scans give the moved block");
+        // Only the driving object's two points count, one of them removed.
+        assert_eq!(m.dynamic_total, 2);
+        assert_eq!(m.dynamic_removed, 1);
+        assert_eq!((m.static_total, m.static_kept), (s.point.static_total, s.point.static_kept));
+        close(m.rr, 0.5);
+        assert_eq!(m.pr, s.point.pr);
+        assert!(render_table(&s).lines().any(|l| l.starts_with("moved")));
+    }
+
+    #[test]
+    fn same_instance_in_one_scan_only_is_not_still() {
+        // Two points of one object in the same voxel of one scan: nothing
+        // of it was seen anywhere else, so both count as moved.
+        let mut acc = DorAccumulator::new(0.2);
+        let l = 254 | (7 << 16);
+        acc.add_labelled_scan(3, &[[1.01, 1.01, 1.01], [1.02, 1.02, 1.02]], &[l, l], &[true, false]).unwrap();
+        // Another instance at the same place in another scan does not make it still.
+        acc.add_labelled_scan(4, &[[1.03, 1.03, 1.03]], &[254 | (8 << 16)], &[true]).unwrap();
+        let m = acc.finish().moved.unwrap();
+        assert_eq!((m.dynamic_total, m.dynamic_removed), (3, 2));
+    }
+
+    #[test]
+    fn moved_block_needs_labels_and_survives_merging() {
+        let scans = two_scans();
+        let mut a = DorAccumulator::new(0.2);
+        let mut b = DorAccumulator::new(0.2);
+        a.add_labelled_scan(scans[0].0, &scans[0].1, &scans[0].2, &scans[0].3).unwrap();
+        b.add_labelled_scan(scans[1].0, &scans[1].1, &scans[1].2, &scans[1].3).unwrap();
+        a.merge(b);
+        assert_eq!(a.finish().moved.unwrap().dynamic_total, 2);
+        // A moving point added without its label: the block cannot be scored.
+        a.add([3.0, 3.0, 3.0], true, true);
+        assert_eq!(a.finish().moved, None);
+        let mut c = DorAccumulator::new(0.2);
+        c.add_scan(&[[0.0; 3]], &[true], &[false]).unwrap();
+        assert_eq!(c.finish().moved, None);
+        assert!(!render_table(&c.finish()).lines().any(|l| l.starts_with("moved")));
+        assert!(c.add_labelled_scan(0, &[[0.0; 3]], &[252], &[]).is_err());
     }
 
     #[test]

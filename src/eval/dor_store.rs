@@ -92,7 +92,7 @@ pub fn dor_report(
     for kf in &keyframes {
         let scan = loader.load(kf)?;
         let n = scan.points.len();
-        let truth = moving_flags(&read_keyframe_labels(labels, kf.keyframe_index as u64, n)?);
+        let truth = read_keyframe_labels(labels, kf.keyframe_index as u64, n)?;
         let removed = match predicted {
             Some(dir) => moving_flags(&read_keyframe_labels(dir, kf.keyframe_index as u64, n)?),
             None => {
@@ -115,7 +115,7 @@ pub fn dor_report(
                 kf.keyframe_index, row.name
             ))
         })?;
-        acc.add_scan(&transformed(&scan.points, pose), &truth, &removed)?;
+        acc.add_labelled_scan(kf.keyframe_index as u32, &transformed(&scan.points, pose), &truth, &removed)?;
     }
     let points = acc.points();
     let step = store::steps(conn, id)?.into_iter().find(|s| s.step == "evidence");
