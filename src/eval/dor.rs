@@ -267,14 +267,7 @@ impl DorAccumulator {
 
     /// A whole scan; the three slices must have the same length.
     pub fn add_scan(&mut self, p_world: &[[f64; 3]], dynamic: &[bool], removed: &[bool]) -> Result<(), EvalError> {
-        if p_world.len() != dynamic.len() || p_world.len() != removed.len() {
-            return Err(EvalError::Mismatch(format!(
-                "DOR scoring got {} points, {} truth flags and {} removal flags; they must be one per point",
-                p_world.len(),
-                dynamic.len(),
-                removed.len()
-            )));
-        }
+        one_per_point(p_world.len(), (dynamic.len(), "truth flags"), removed.len())?;
         self.voxels.reserve(p_world.len() / 4);
         for ((p, &d), &r) in p_world.iter().zip(dynamic).zip(removed) {
             self.add(*p, d, r);
@@ -291,14 +284,7 @@ impl DorAccumulator {
         labels: &[u32],
         removed: &[bool],
     ) -> Result<(), EvalError> {
-        if p_world.len() != labels.len() || p_world.len() != removed.len() {
-            return Err(EvalError::Mismatch(format!(
-                "DOR scoring got {} points, {} labels and {} removal flags; they must be one per point",
-                p_world.len(),
-                labels.len(),
-                removed.len()
-            )));
-        }
+        one_per_point(p_world.len(), (labels.len(), "labels"), removed.len())?;
         self.voxels.reserve(p_world.len() / 4);
         for ((p, &l), &r) in p_world.iter().zip(labels).zip(removed) {
             let dynamic = is_moving_label(l);
@@ -378,6 +364,17 @@ impl DorAccumulator {
         }
         DorScores { voxel_m: self.voxel_m, point: self.points.block(), voxel: voxel.block(), moved: self.moved_block() }
     }
+}
+
+/// A scan's truth (`what`: flags or labels) and removal flags must be one
+/// per point.
+fn one_per_point(points: usize, (truth, what): (usize, &str), removed: usize) -> Result<(), EvalError> {
+    if truth == points && removed == points {
+        return Ok(());
+    }
+    Err(EvalError::Mismatch(format!(
+        "DOR scoring got {points} points, {truth} {what} and {removed} removal flags; they must be one per point"
+    )))
 }
 
 fn pct(x: Option<f64>) -> String {
