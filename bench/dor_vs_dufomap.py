@@ -423,7 +423,8 @@ def table(results, threads):
     out = "\n".join(lines)
     out += ("\n\nPR/RR/F1/prec: point-wise; vPR..vprec: voxel-wise at 0.2 m (majority vote per voxel). "
             "prec = precision of removal.\nmRR/mF1: point-wise without the moving-labelled points that stayed "
-            "in place (within one voxel of their own object in another scan; `seam eval dor`'s moved block).\npoints/s and time: seam = wall time of its ingest's evidence step "
+            "in place (within one voxel of their own object in another scan; `seam eval dor`'s moved block)."
+            "\npoints/s and time: seam = wall time of its ingest's evidence step "
             "(reading its scans, ray casting, DOR, writing its files), DUFOMap = run+propagate+segment wall time "
             f"(scans preloaded); {threads if threads > 0 else 'all'} threads each.\nmem pts/s: seam without reading "
             "scans and writing files (the step's `generate_s`: ray casting, evidence, DOR, cleaned map in memory), "

@@ -21,7 +21,10 @@
 use seam::eval::dor::{DorAccumulator, render_table};
 use seam::evidence::EvidenceConfig;
 use seam::evidence::session::{KeyframeInput, generate};
-use seam::io::{detect_session, is_moving_label, read_kitti_poses, read_labels, read_session_scan};
+use seam::io::{
+    detect_session, is_moving_label, label_class, label_instance, read_kitti_poses, read_labels, read_session_scan,
+};
+use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
@@ -75,24 +78,20 @@ fn run() -> Result<(), String> {
         src.keyframes.iter().map(|k| k.t_session_sensor).collect()
     };
     let mut scans = Vec::new();
-    let mut truth = Vec::new();
-    let mut classes: Vec<Vec<u16>> = Vec::new();
-    let mut instances: Vec<Vec<u16>> = Vec::new();
-    let mut raw_labels: Vec<Vec<u32>> = Vec::new();
+    // Each keyframe's raw labels (class | instance << 16), in scan order.
+    let mut labels: Vec<Vec<u32>> = Vec::new();
     for (i, kf) in src.keyframes.iter().enumerate() {
         let scan = read_session_scan(&src, i).map_err(|e| e.to_string())?;
-        let labels = match &kf.labels_path {
+        labels.push(match &kf.labels_path {
             Some(p) => read_labels(p, scan.len()).map_err(|e| e.to_string())?,
             None => return Err(format!("{}: keyframe {i} has no labels", dir.display())),
-        };
-        truth.push(labels.iter().map(|&l| is_moving_label(l)).collect::<Vec<bool>>());
-        raw_labels.push(labels.clone());
-        classes.push(labels.iter().map(|&l| (l & 0xffff) as u16).collect());
-        instances.push(labels.iter().map(|&l| (l >> 16) as u16).collect());
+        });
         scans.push(scan.points);
     }
+    // (keyframe, label) of every point, in the order of the verdicts.
+    let every_label = || labels.iter().enumerate().flat_map(|(i, l)| l.iter().map(move |&l| (i, l)));
     let points: usize = scans.iter().map(Vec::len).sum();
-    let dynamic: usize = truth.iter().flatten().filter(|&&d| d).count();
+    let dynamic = every_label().filter(|&(_, l)| is_moving_label(l)).count();
     println!("{}: {} keyframes, {points} points, {dynamic} moving", dir.display(), scans.len());
     for sets in groups {
         let cfg = parse_cfg(&sets)?;
@@ -111,15 +110,9 @@ fn run() -> Result<(), String> {
         let secs = t.elapsed().as_secs_f64();
         let mut acc = DorAccumulator::new(0.2);
         let mut row = 0;
-        let mut by_class: std::collections::BTreeMap<u16, (usize, usize)> = Default::default();
         for (i, p) in scans.iter().enumerate() {
-            for (j, _) in p.iter().enumerate() {
-                let e = by_class.entry(classes[i][j]).or_default();
-                e.0 += 1;
-                e.1 += out.labels.dynamic[row + j] as usize;
-            }
             let world = seam::geometry::transformed(p, &poses[i]);
-            acc.add_labelled_scan(i as u32, &world, &raw_labels[i], &out.labels.dynamic[row..row + p.len()])
+            acc.add_labelled_scan(i as u32, &world, &labels[i], &out.labels.dynamic[row..row + p.len()])
                 .map_err(|e| e.to_string())?;
             row += p.len();
         }
@@ -133,15 +126,13 @@ fn run() -> Result<(), String> {
             out.stats.generated_voxels
         );
         println!("{}", render_table(&s));
+        // Every point's (keyframe, label, removed, eps_l).
+        let verdicts =
+            || every_label().zip(&out.labels.dynamic).zip(&out.labels.eps_l).map(|(((i, l), &d), &e)| (i, l, d, e));
         if std::env::var_os("DOR_HIST").is_some() {
             let mut h = [[0usize; 10]; 2];
-            let mut row = 0;
-            for t in &truth {
-                for &d in t {
-                    let e = out.labels.eps_l[row];
-                    h[d as usize][((e * 10.0) as usize).min(9)] += 1;
-                    row += 1;
-                }
+            for (_, l, _, e) in verdicts() {
+                h[is_moving_label(l) as usize][((e * 10.0) as usize).min(9)] += 1;
             }
             println!("  eps_l deciles, static : {:?}\n  eps_l deciles, dynamic: {:?}", h[0], h[1]);
         }
@@ -152,18 +143,12 @@ fn run() -> Result<(), String> {
             std::fs::write(&path, bytes).map_err(|e| e.to_string())?;
         }
         if std::env::var_os("DOR_INSTANCES").is_some() {
-            // Moving points by (keyframe, instance): removed of all.
-            let mut by_inst: std::collections::BTreeMap<(u16, usize), (usize, usize)> = Default::default();
-            let mut row = 0;
-            for (i, t) in truth.iter().enumerate() {
-                for (j, &d) in t.iter().enumerate() {
-                    if d {
-                        let e = by_inst.entry((instances[i][j], i)).or_default();
-                        e.0 += 1;
-                        e.1 += out.labels.dynamic[row] as usize;
-                    }
-                    row += 1;
-                }
+            // Moving points by (instance, keyframe): removed of all.
+            let mut by_inst: BTreeMap<(u16, usize), (usize, usize)> = BTreeMap::new();
+            for (i, l, d, _) in verdicts().filter(|&(_, l, _, _)| is_moving_label(l)) {
+                let e = by_inst.entry((label_instance(l), i)).or_default();
+                e.0 += 1;
+                e.1 += d as usize;
             }
             let mut last = None;
             for ((inst, kf), (n, r)) in &by_inst {
@@ -176,6 +161,12 @@ fn run() -> Result<(), String> {
             println!();
         }
         if std::env::var_os("DOR_CLASSES").is_some() {
+            let mut by_class: BTreeMap<u16, (usize, usize)> = BTreeMap::new();
+            for (_, l, d, _) in verdicts() {
+                let e = by_class.entry(label_class(l)).or_default();
+                e.0 += 1;
+                e.1 += d as usize;
+            }
             for (c, (n, r)) in &by_class {
                 println!("  class {c:>3}: {r:>7} of {n:>8} removed ({:.1} %)", 100.0 * *r as f64 / *n as f64);
             }

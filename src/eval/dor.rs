@@ -46,7 +46,7 @@
 //! index in its session), zero-padded to 6 digits.
 
 use super::EvalError;
-use crate::io::{ReadError, ReadErrorKind};
+use crate::io::{ReadError, ReadErrorKind, label_instance};
 
 /// Label-file errors become `EvalError::Mismatch` carrying the rendered
 /// [`ReadError`] (path, problem, hint): the same exit code (data) a
@@ -254,12 +254,12 @@ impl DorAccumulator {
         if dynamic {
             self.movers = None;
         }
-        self.tally(p_world, dynamic, removed);
+        self.tally(self.voxel_key(p_world), dynamic, removed);
     }
 
-    fn tally(&mut self, p_world: [f64; 3], dynamic: bool, removed: bool) {
+    fn tally(&mut self, key: [i32; 3], dynamic: bool, removed: bool) {
         self.points.add(dynamic, removed);
-        let t = self.voxels.entry(self.voxel_key(p_world)).or_default();
+        let t = self.voxels.entry(key).or_default();
         t.dynamic += u32::from(dynamic);
         t.removed += u32::from(removed);
         t.total += 1;
@@ -287,15 +287,10 @@ impl DorAccumulator {
         one_per_point(p_world.len(), (labels.len(), "labels"), removed.len())?;
         self.voxels.reserve(p_world.len() / 4);
         for ((p, &l), &r) in p_world.iter().zip(labels).zip(removed) {
-            let dynamic = is_moving_label(l);
-            self.tally(*p, dynamic, r);
+            let (key, dynamic) = (self.voxel_key(*p), is_moving_label(l));
+            self.tally(key, dynamic, r);
             if dynamic && let Some(m) = self.movers.as_mut() {
-                m.push(MoverPoint {
-                    key: p.map(|c| (c / self.voxel_m).floor() as i32),
-                    instance: (l >> 16) as u16,
-                    keyframe,
-                    removed: r,
-                });
+                m.push(MoverPoint { key, instance: label_instance(l), keyframe, removed: r });
             }
         }
         Ok(())

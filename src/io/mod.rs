@@ -58,6 +58,11 @@ pub fn label_class(label: u32) -> u16 {
     (label & 0xffff) as u16
 }
 
+/// The instance id of a label (its high 16 bits; 0 where none).
+pub fn label_instance(label: u32) -> u16 {
+    (label >> 16) as u16
+}
+
 /// True when a SemanticKITTI label is one of the [`MOVING_CLASSES`].
 pub fn is_moving_label(label: u32) -> bool {
     MOVING_CLASSES.contains(&label_class(label))
