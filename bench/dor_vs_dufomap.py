@@ -6,7 +6,7 @@ Usage (from the project root, after `pip install dufomap numpy`):
 
     python3 bench/dor_vs_dufomap.py [--kitti 04,08] [--sensors os1-64,hdl-64e,vlp16,hdl-32e,avia]
         [--keyframes 60] [--seed 1] [--dufomap "0.1,0.2,1;0.1,0.2,2;0.2,0.2,1"] [--threads 2]
-        [--seam target/release/seam] [--no-build] [--out DIR] [--json results.json] [--selfcheck]
+        [--seam target/release/seam] [--no-build] [--out DIR] [--json results.json] [--repeat 1] [--selfcheck]
 
 Datasets: SemanticKITTI sequences (`--kitti-root`, default ../shared/data/semantickitti
 relative to the project root; KITTI layout with labels/NNNNNN.label), and one
@@ -22,8 +22,8 @@ Per dataset:
    "voxel"` ("seam voxel-rule": the paper's rule, every voxel a ray crosses
    is free), and into a fourth with CEILING_TOML ("any-free-ray ceiling": a
    point is removed as soon as any ray of another keyframe crossed its
-   voxel, with no guard, no clearance, no surface test, no weighing against
-   hits and no growth step). That row's PR is meaningless; its RR is the
+   voxel, with rays to every point, no guard, no clearance, no surface
+   test, no weighing against hits and no growth step). That row's PR is meaningless; its RR is the
    share of moving points that any method removing only space some ray saw
    empty can reach at 0.2 m, and 2·RR/(1+RR) the F1 it allows at a PR of
    100 %.
@@ -69,6 +69,7 @@ import argparse
 import json
 import os
 import shutil
+import statistics
 import subprocess
 import sys
 import time
@@ -95,7 +96,7 @@ VOXEL_TOML = '[evidence]\nfree_test = "voxel"\n'
 # Every voxel any ray of another keyframe crossed is dynamic: ε_l > 0 iff the
 # voxel has free evidence (ω's floor 1 so one direction counts; the lower
 # clamp 0 so τ_dyn just above 0 separates f = 0 from f > 0).
-CEILING_TOML = ('[evidence]\nfree_test = "voxel"\nfree_guard_voxels = 0\nfree_guard_deg = 0\nfree_clearance_m = 0\n'
+CEILING_TOML = ('[evidence]\nfree_test = "voxel"\none_ray_per_voxel = false\nfree_guard_voxels = 0\nfree_guard_deg = 0\nfree_clearance_m = 0\n'
                 'omega_floor = 1\neps_min = 0\ntau_dyn = 0.000001\ngrow_max_hits = 0\n')
 SENSORS = "os1-64,hdl-64e,vlp16,hdl-32e,avia"
 DUFOMAP_DEFAULT = "0.1,0.2,1;0.1,0.2,2;0.2,0.2,1"
@@ -368,7 +369,41 @@ def dataset_rows(args, seam, name, dir_, work, eval_ok, variants):
             else:
                 row.update(scores=py, source="python selfcheck")
         out["rows"].append(row)
+    if args.repeat > 1:
+        repeat_timings(args, seam, name, dir_, stores, session, scans, poses, out["rows"])
     return out
+
+
+def repeat_timings(args, seam, name, dir_, stores, session, scans, poses, rows):
+    """`--repeat`: `seam` (default config) and each DUFOMap setting timed
+    `--repeat` times in all, in turns, so that a slow spell of this machine
+    falls on both; each row's times become the medians, the runs kept."""
+    seam_row = next((r for r in rows if r["method"] == "seam" and "scores" in r), None)
+    duf_rows = [r for r in rows if r["method"].startswith("dufomap") and "timing" in r]
+    if seam_row is not None:
+        seam_row["runs"] = [{"time_s": seam_row["time_s"], "in_memory_s": seam_row["in_memory_s"]}]
+    for r in duf_rows:
+        r["runs"] = [r["time_s"]]
+    for i in range(1, args.repeat):
+        log(f"[{name}] timing round {i + 1} of {args.repeat}")
+        if seam_row is not None:
+            store = stores / "seam-repeat.seam"
+            ingest(seam, store, dir_)
+            r = eval_dor(seam, store, dir_, session)
+            seam_row["runs"].append({"time_s": r.get("evidence_s"), "in_memory_s": r.get("in_memory_s")})
+        for row in duf_rows:
+            _, timing = run_dufomap(scans, poses, row["resolution_m"], row["d_s_m"], row["d_p_voxels"], args.threads)
+            row["runs"].append(timing["total_s"])
+    npts = sum(len(s) for s in scans)
+    if seam_row is not None:
+        for key, rate in (("time_s", "points_per_s"), ("in_memory_s", "in_memory_points_per_s")):
+            ts = [x[key] for x in seam_row["runs"] if x[key]]
+            if ts:
+                seam_row[key] = statistics.median(ts)
+                seam_row[rate] = seam_row["eval"]["points"] / seam_row[key]
+    for row in duf_rows:
+        row["time_s"] = statistics.median(row["runs"])
+        row["points_per_s"] = npts / row["time_s"]
 
 
 # ---------------------------------------------------------------- output
@@ -378,7 +413,7 @@ def pct(x):
     return "-" if x is None else f"{100 * x:.2f}"
 
 
-def table(results, threads):
+def table(results, threads, repeat=1):
     head = ["dataset", "method", "PR%", "RR%", "F1%", "prec%", "vPR%", "vRR%", "vF1%", "vprec%", "mRR%", "mF1%",
             "points/s", "time s", "mem pts/s"]
     rows = []
@@ -426,7 +461,9 @@ def table(results, threads):
             "in place (within one voxel of their own object in another scan; `seam eval dor`'s moved block)."
             "\npoints/s and time: seam = wall time of its ingest's evidence step "
             "(reading its scans, ray casting, DOR, writing its files), DUFOMap = run+propagate+segment wall time "
-            f"(scans preloaded); {threads if threads > 0 else 'all'} threads each.\nmem pts/s: seam without reading "
+            f"(scans preloaded); {threads if threads > 0 else 'all'} threads each"
+            + (f"; seam and DUFOMap rows: medians of {repeat} runs in turns" if repeat > 1 else "")
+            + ".\nmem pts/s: seam without reading "
             "scans and writing files (the step's `generate_s`: ray casting, evidence, DOR, cleaned map in memory), "
             "the like of DUFOMap's timing; DUFOMap: its points/s again.")
     if flagged:
@@ -495,6 +532,9 @@ def main():
     ap.add_argument("--no-build", action="store_true", help="do not run `cargo build --release` first")
     ap.add_argument("--out", help="keep stores, simulations and DUFOMap labels here (default: a temp dir)")
     ap.add_argument("--json", help="write every number here")
+    ap.add_argument("--repeat", type=int, default=1,
+                    help="time seam (default config) and each DUFOMap setting this many times, in turns, "
+                         "and report the medians (default 1)")
     ap.add_argument("--selfcheck", action="store_true",
                     help="also score DUFOMap in Python and compare with `seam eval dor`")
     args = ap.parse_args()
@@ -543,7 +583,7 @@ def main():
             log(f"[{name}] skipped: {e}")
             results.append({"dataset": name, "dir": str(d), "rows": [], "errors": [str(e)]})
 
-    print(table(results, args.threads))
+    print(table(results, args.threads, args.repeat))
     if scalar_note:
         print("note: " + "\n      ".join(scalar_note.splitlines()))
     if args.json:
@@ -551,7 +591,7 @@ def main():
 
         doc = {
             "seam": str(Path(args.seam)), "dufomap_version": getattr(dufomap_pkg, "__version__", None),
-            "threads": args.threads, "cpus": os.cpu_count(), "keyframes": args.keyframes, "seed": args.seed,
+            "threads": args.threads, "repeat": args.repeat, "cpus": os.cpu_count(), "keyframes": args.keyframes, "seed": args.seed,
             "sensors": args.sensors, "kitti": args.kitti, "load_before": load_before, "load_after": os.getloadavg(),
             "runtime_s": time.perf_counter() - t_start,
             "dufomap_settings": args.dufomap_cfgs, "work_dir": str(work), "seam_eval_dor": eval_ok,

@@ -545,42 +545,73 @@ impl KeyframeRays<'_> {
     }
 }
 
+/// The points a keyframe casts rays to with
+/// [`EvidenceConfig::one_ray_per_voxel`], in scan order: of each voxel of
+/// interest (a row of `index` over `keys`, `rows` of them) its points fall
+/// in, the first; every point in no such voxel (the interest set is every
+/// voxel the session's points occupy, so there are none in a session's own
+/// rays); none without a voxel key. A bit per row instead of sorting the
+/// points by voxel: sorting was a tenth of a simulated HDL-64E session's
+/// evidence step.
+fn first_point_per_voxel(points_m: &[[f64; 3]], voxel_m: f64, keys: &[u64], index: &KeyIndex) -> Vec<[f64; 3]> {
+    const NONE: u32 = u32::MAX;
+    let rows: Vec<u32> = points_m
+        .par_iter()
+        .with_min_len(4096)
+        .map(|p| match voxel_key(p, voxel_m) {
+            None => NONE - 1,
+            Some(k) => index.find_voxel(keys, &k.0).map_or(NONE, |i| i as u32),
+        })
+        .collect();
+    let mut seen = vec![0u64; keys.len().div_ceil(64)];
+    points_m
+        .iter()
+        .zip(rows)
+        .filter(|&(_, i)| match i {
+            NONE => true,
+            i if i == NONE - 1 => false,
+            i => {
+                let (w, bit) = (i as usize / 64, 1u64 << (i % 64));
+                let first = seen[w] & bit == 0;
+                seen[w] |= bit;
+                first
+            }
+        })
+        .map(|(p, _)| *p)
+        .collect()
+}
+
 /// Pass 1: casts every ray of a keyframe, in parallel, and marks its hit
 /// and free voxels of interest inside the ray box `b` (with `banded`, the
-/// frees only the lower clearance allows apart). Returns the rays cast.
+/// frees only the lower clearance allows apart).
 fn mark_rays<L: MarkLayout>(
     layout: &L,
     rays: &KeyframeRays<'_>,
     b: Box3,
     banded: bool,
     points_m: &[[f64; 3]],
-) -> (usize, KeyframeMarks<L::Marks>) {
+) -> KeyframeMarks<L::Marks> {
     let marks = KeyframeMarks { b, all: layout.marks(&b), band: banded.then(|| layout.marks(&b)) };
-    let cast = points_m
-        .par_iter()
-        .with_min_len(2048)
-        .map(|p| {
-            let kz = rays.clearances(p);
-            let on_free = |k: VoxelKey, slot: L::Slot| {
-                if !b.contains(&k.0) {
-                    return;
-                }
-                match (rays.frees(&k, p, kz), &marks.band) {
-                    (Some(true), _) => L::mark(&marks.all, slot, FREE),
-                    (Some(false), Some(band)) => L::mark(band, slot, FREE),
-                    _ => {}
-                }
-            };
-            let hit = layout.cast(rays.origin_m, p, rays.voxel_m, on_free);
-            if let Some((k, Some(slot))) = hit
-                && b.contains(&k.0)
-            {
-                L::mark(&marks.all, slot, HIT);
+    points_m.par_iter().with_min_len(2048).for_each(|p| {
+        let kz = rays.clearances(p);
+        let on_free = |k: VoxelKey, slot: L::Slot| {
+            if !b.contains(&k.0) {
+                return;
             }
-            hit.is_some() as usize
-        })
-        .sum();
-    (cast, marks)
+            match (rays.frees(&k, p, kz), &marks.band) {
+                (Some(true), _) => L::mark(&marks.all, slot, FREE),
+                (Some(false), Some(band)) => L::mark(band, slot, FREE),
+                _ => {}
+            }
+        };
+        let hit = layout.cast(rays.origin_m, p, rays.voxel_m, on_free);
+        if let Some((k, Some(slot))) = hit
+            && b.contains(&k.0)
+        {
+            L::mark(&marks.all, slot, HIT);
+        }
+    });
+    marks
 }
 
 /// The rows of an [`InterestEvidence`] pass 2 writes, borrowed apart from
@@ -1126,9 +1157,8 @@ impl InterestEvidence {
             sky_bits[i as usize / 64] |= 1 << (i % 64);
         }
         let b = Box3::of_rays(origin_m, points_m, v).intersect(&self.bounds).limit(o_key.0, DENSE_MAX_VOXELS);
-        let cast = if b.is_empty() {
-            points_m.iter().filter(|p| voxel_key(p, v).is_some()).count()
-        } else {
+        let cast = points_m.iter().filter(|p| voxel_key(p, v).is_some()).count();
+        if !b.is_empty() {
             let InterestEvidence { keys, rows, log_odds, bounds, unguarded, ground, index, .. } = self;
             let ground = ground.as_deref();
             let rays = KeyframeRays {
@@ -1146,21 +1176,27 @@ impl InterestEvidence {
             // Only interest voxels get evidence: with a mask, rays report
             // only those and jump over the blocks that hold none.
             let index = index.get_or_init(|| KeyIndex::new(keys, bounds));
-            let (cast, (h, f)) = match index.mask() {
+            let firsts;
+            let rays_m = if cfg.one_ray_per_voxel {
+                firsts = first_point_per_voxel(points_m, v, keys, index);
+                &firsts[..]
+            } else {
+                points_m
+            };
+            let (h, f) = match index.mask() {
                 Some(mask) => {
                     let layout = ByRank { mask, ranks: index.ranks() };
-                    let (cast, marks) = mark_rays(&layout, &rays, b, banded, points_m);
-                    (cast, rows.apply(&layout, &marks, &rays, &sky_bits))
+                    let marks = mark_rays(&layout, &rays, b, banded, rays_m);
+                    rows.apply(&layout, &marks, &rays, &sky_bits)
                 }
                 None => {
-                    let (cast, marks) = mark_rays(&ByBox, &rays, b, banded, points_m);
-                    (cast, rows.apply(&ByBox, &marks, &rays, &sky_bits))
+                    let marks = mark_rays(&ByBox, &rays, b, banded, rays_m);
+                    rows.apply(&ByBox, &marks, &rays, &sky_bits)
                 }
             };
             out.hit_voxels = h;
             out.free_voxels = f;
-            cast
-        };
+        }
         out.skipped_rays = points_m.len() - cast;
         self.add_free_rows(&sky, origin_m, keyframe, cfg);
         out.no_return_voxels = sky.len();
@@ -1392,32 +1428,45 @@ mod tests {
     }
 
     /// On the interest voxels, the rows equal the full hash-map evidence of
-    /// `accumulate_keyframe` (to f32 rounding), and ε_l agrees. (A small
-    /// pseudo-count keeps eq. 8 away from its 0/0 edge, where ω of nearly
-    /// parallel rays sits at the α floor and f32 rounding decides.)
+    /// `accumulate_keyframe` (to f32 rounding), and ε_l agrees: for rays to
+    /// every point, and with `one_ray_per_voxel` for the reference's rays
+    /// to the first point of each voxel. (A small pseudo-count keeps eq. 8
+    /// away from its 0/0 edge, where ω of nearly parallel rays sits at the α
+    /// floor and f32 rounding decides.)
     #[test]
     fn interest_rows_equal_full_map_on_their_voxels() {
+        for one_ray_per_voxel in [false, true] {
+            rows_equal_full_map(one_ray_per_voxel);
+        }
+    }
+
+    fn rows_equal_full_map(one_ray_per_voxel: bool) {
         let mut rng = ChaCha8Rng::seed_from_u64(9);
         let cfg = EvidenceConfig {
             pseudo_count: 0.05,
             free_guard_voxels: 0,
             free_guard_deg: 0.0,
             free_clearance_m: 0.0,
+            one_ray_per_voxel,
             ..Default::default()
         };
+        let v = cfg.voxel_size_m;
+        // Each point with a second one 4 cm aside, often in its voxel.
         let frames: Vec<([f64; 3], Vec<[f64; 3]>)> = (0..5)
             .map(|i| {
                 let o = [i as f64 * 2.5, 0.3 * i as f64, 1.5];
-                (o, scan(&mut rng, o, 8000))
+                (o, scan(&mut rng, o, 4000).into_iter().flat_map(|p| [p, [p[0] + 0.04, p[1], p[2]]]).collect())
             })
             .collect();
-        let keys: Vec<u64> =
-            frames.iter().flat_map(|(_, p)| p.iter().filter_map(|p| packed_key(p, cfg.voxel_size_m))).collect();
-        let mut ev = InterestEvidence::new(keys, cfg.voxel_size_m);
+        let keys: Vec<u64> = frames.iter().flat_map(|(_, p)| p.iter().filter_map(|p| packed_key(p, v))).collect();
+        let mut ev = InterestEvidence::new(keys, v);
         let mut full = EvidenceMap::default();
         for (i, (o, p)) in frames.iter().enumerate() {
             let a = ev.add_keyframe(o, p, i as u32, &cfg, None);
-            accumulate_keyframe(o, p, i as u32, &cfg, &mut full);
+            let firsts = first_point_per_voxel(p, v, ev.keys(), ev.index());
+            assert_eq!(firsts, first_point_per_voxel_by_sorting(p, v));
+            assert!(firsts.len() < p.len() * 9 / 10, "{} of {}", firsts.len(), p.len());
+            accumulate_keyframe(o, if one_ray_per_voxel { &firsts } else { p }, i as u32, &cfg, &mut full);
             assert_eq!(a.skipped_rays, 0);
             assert!(a.hit_voxels > 0 && a.free_voxels > 0);
         }
@@ -1448,6 +1497,50 @@ mod tests {
         // Random points in free space: later keyframes' rays pass through
         // earlier endpoints, so some voxels must come out dynamic.
         assert!(dynamic > 0);
+    }
+
+    /// The reference for [`first_point_per_voxel`] where every point's voxel
+    /// is of interest: the points sorted by voxel, each voxel's first kept.
+    fn first_point_per_voxel_by_sorting(points_m: &[[f64; 3]], v: f64) -> Vec<[f64; 3]> {
+        let mut by_voxel: Vec<([i32; 3], usize)> =
+            points_m.iter().enumerate().filter_map(|(i, p)| Some((voxel_key(p, v)?.0, i))).collect();
+        by_voxel.sort_unstable();
+        let mut firsts: Vec<usize> = by_voxel.chunk_by(|a, b| a.0 == b.0).map(|run| run[0].1).collect();
+        firsts.sort_unstable();
+        firsts.into_iter().map(|i| points_m[i]).collect()
+    }
+
+    /// One point per voxel of interest, the first in scan order, kept in
+    /// scan order; every point outside the voxels of interest kept, and
+    /// points without a voxel key left out. With a mask and without.
+    #[test]
+    fn first_point_per_voxel_keeps_each_voxels_first_in_scan_order() {
+        let pts = [
+            [0.15, 0.05, 0.05],
+            [0.05, 0.05, 0.05],
+            [f64::NAN, 0.0, 0.0],
+            [0.11, 0.01, 0.09],
+            [0.01, 0.19, 0.02],
+            [-0.01, 0.0, 0.0],
+            [0.02, 0.03, 0.04],
+        ];
+        let v = 0.1;
+        // Voxels of interest: those of points 0, 1 and 4 (not 5's), and, for
+        // the index without a mask, one 30 km off.
+        let keys = |far: bool| {
+            let mut k: Vec<u64> = [0, 1, 4].iter().map(|&i| packed_key(&pts[i], v).unwrap()).collect();
+            k.extend(far.then(|| pack(VoxelKey([150_000, 150_000, 0])).unwrap()));
+            k.sort_unstable();
+            k
+        };
+        for far in [false, true] {
+            let keys = keys(far);
+            let index = KeyIndex::new(&keys, &Box3::of_packed(&keys));
+            assert_eq!(index.mask().is_none(), far);
+            let got = first_point_per_voxel(&pts, v, &keys, &index);
+            assert_eq!(got, vec![pts[0], pts[1], pts[4], pts[5]]);
+        }
+        assert_eq!(first_point_per_voxel_by_sorting(&pts, v), vec![pts[0], pts[1], pts[4], pts[5]]);
     }
 
     /// An interest set too wide for a mask is marked by place in the ray box

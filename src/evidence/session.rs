@@ -90,6 +90,14 @@ fn world_points(kf: &KeyframeInput<'_>) -> Vec<[f64; 3]> {
     transformed(kf.points, &kf.t_world_keyframe)
 }
 
+/// [`world_points`] into `out` (cleared first): one buffer for a loop over
+/// keyframes, so that each keyframe's few megabytes are not fresh pages.
+fn world_points_into(kf: &KeyframeInput<'_>, out: &mut Vec<[f64; 3]>) {
+    let t = &kf.t_world_keyframe;
+    out.clear();
+    out.extend(kf.points.iter().map(|p| <[f64; 3]>::from(t * Point3::new(p[0] as f64, p[1] as f64, p[2] as f64))));
+}
+
 fn origin(kf: &KeyframeInput<'_>) -> [f64; 3] {
     kf.t_world_keyframe.translation.vector.into()
 }
@@ -208,6 +216,7 @@ pub fn generate(
     let t_ray = Instant::now();
     let mut submaps = Vec::with_capacity(n_submaps);
     let mut done = 0;
+    let mut pts = Vec::new();
     for (s, b) in submap_box.iter().enumerate() {
         let (mut sub, idx) = session.subset(b);
         session.continue_log_odds(&mut sub, &idx);
@@ -221,7 +230,7 @@ pub fn generate(
         };
         let mut rays = RayStats::default();
         for kf in keyframes.iter().filter(|k| k.submap == s) {
-            let pts = world_points(kf);
+            world_points_into(kf, &mut pts);
             let image = no_return_fov.and_then(|f| NoReturnImage::build(kf.points, f, cfg.no_return_margin_deg));
             let no_return = image.as_ref().map(|image| NoReturn {
                 image,
