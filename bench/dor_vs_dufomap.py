@@ -23,10 +23,10 @@ Per dataset:
    is free), and into a fourth with CEILING_TOML ("any-free-ray ceiling": a
    point is removed as soon as any ray of another keyframe crossed its
    voxel, with rays to every point, no guard, no clearance, no surface
-   test, no weighing against hits and no growth step). That row's PR is meaningless; its RR is the
-   share of moving points that any method removing only space some ray saw
-   empty can reach at 0.2 m, and 2·RR/(1+RR) the F1 it allows at a PR of
-   100 %.
+   test, no weighing against hits and no growth step). That row's PR is
+   meaningless; its RR is the share of moving points that any method
+   removing only space some ray saw empty can reach at 0.2 m, and
+   2·RR/(1+RR) the F1 it allows at a PR of 100 %.
 2. `seam poses STORE --session NAME --format kitti` (and `--format json`
    for the keyframe indices) of the seam store: the LiDAR world poses DUFOMap
    gets, so both see the same scans at the same poses.
@@ -96,8 +96,8 @@ VOXEL_TOML = '[evidence]\nfree_test = "voxel"\n'
 # Every voxel any ray of another keyframe crossed is dynamic: ε_l > 0 iff the
 # voxel has free evidence (ω's floor 1 so one direction counts; the lower
 # clamp 0 so τ_dyn just above 0 separates f = 0 from f > 0).
-CEILING_TOML = ('[evidence]\nfree_test = "voxel"\none_ray_per_voxel = false\nfree_guard_voxels = 0\nfree_guard_deg = 0\nfree_clearance_m = 0\n'
-                'omega_floor = 1\neps_min = 0\ntau_dyn = 0.000001\ngrow_max_hits = 0\n')
+CEILING_TOML = ('[evidence]\nfree_test = "voxel"\none_ray_per_voxel = false\nfree_guard_voxels = 0\nfree_guard_deg = 0\n'
+                'free_clearance_m = 0\nomega_floor = 1\neps_min = 0\ntau_dyn = 0.000001\ngrow_max_hits = 0\n')
 SENSORS = "os1-64,hdl-64e,vlp16,hdl-32e,avia"
 DUFOMAP_DEFAULT = "0.1,0.2,1;0.1,0.2,2;0.2,0.2,1"
 
@@ -591,7 +591,8 @@ def main():
 
         doc = {
             "seam": str(Path(args.seam)), "dufomap_version": getattr(dufomap_pkg, "__version__", None),
-            "threads": args.threads, "repeat": args.repeat, "cpus": os.cpu_count(), "keyframes": args.keyframes, "seed": args.seed,
+            "threads": args.threads, "repeat": args.repeat, "cpus": os.cpu_count(), "keyframes": args.keyframes,
+            "seed": args.seed,
             "sensors": args.sensors, "kitti": args.kitti, "load_before": load_before, "load_after": os.getloadavg(),
             "runtime_s": time.perf_counter() - t_start,
             "dufomap_settings": args.dufomap_cfgs, "work_dir": str(work), "seam_eval_dor": eval_ok,

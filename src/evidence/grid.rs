@@ -547,20 +547,21 @@ impl KeyframeRays<'_> {
 
 /// The points a keyframe casts rays to with
 /// [`EvidenceConfig::one_ray_per_voxel`], in scan order: of each voxel of
-/// interest (a row of `index` over `keys`, `rows` of them) its points fall
-/// in, the first; every point in no such voxel (the interest set is every
-/// voxel the session's points occupy, so there are none in a session's own
-/// rays); none without a voxel key. A bit per row instead of sorting the
-/// points by voxel: sorting was a tenth of a simulated HDL-64E session's
-/// evidence step.
+/// interest (a row of `index` over `keys`) its points fall in, the first;
+/// every point in no such voxel (the interest set is every voxel the
+/// session's points occupy, so there are none in a session's own rays);
+/// none without a voxel key. A bit per row instead of sorting the points by
+/// voxel: sorting was a tenth of a simulated HDL-64E session's evidence step.
 fn first_point_per_voxel(points_m: &[[f64; 3]], voxel_m: f64, keys: &[u64], index: &KeyIndex) -> Vec<[f64; 3]> {
-    const NONE: u32 = u32::MAX;
+    // A point's row, or one of these two.
+    const NOT_OF_INTEREST: u32 = u32::MAX;
+    const NO_KEY: u32 = u32::MAX - 1;
     let rows: Vec<u32> = points_m
         .par_iter()
         .with_min_len(4096)
         .map(|p| match voxel_key(p, voxel_m) {
-            None => NONE - 1,
-            Some(k) => index.find_voxel(keys, &k.0).map_or(NONE, |i| i as u32),
+            None => NO_KEY,
+            Some(k) => index.find_voxel(keys, &k.0).map_or(NOT_OF_INTEREST, |i| i as u32),
         })
         .collect();
     let mut seen = vec![0u64; keys.len().div_ceil(64)];
@@ -568,8 +569,8 @@ fn first_point_per_voxel(points_m: &[[f64; 3]], voxel_m: f64, keys: &[u64], inde
         .iter()
         .zip(rows)
         .filter(|&(_, i)| match i {
-            NONE => true,
-            i if i == NONE - 1 => false,
+            NOT_OF_INTEREST => true,
+            NO_KEY => false,
             i => {
                 let (w, bit) = (i as usize / 64, 1u64 << (i % 64));
                 let first = seen[w] & bit == 0;

@@ -33,7 +33,7 @@ use super::raycast::voxel_key;
 use super::stats::{EvidenceConfig, FreeTest};
 use super::surface::{MapPatch, Moments, SurfaceShapes};
 use super::tables::{CleanedMap, NO_HIT_BOX, PointLabels, SubmapEvidence};
-use crate::geometry::{Pose, VoxelKey, rotate_sym, rotation_rows, transformed};
+use crate::geometry::{Pose, VoxelKey, rotate_sym, rotation_rows, transformed, transformed_into};
 use crate::sensor::Fov;
 use nalgebra::Point3;
 use rayon::prelude::*;
@@ -93,9 +93,7 @@ fn world_points(kf: &KeyframeInput<'_>) -> Vec<[f64; 3]> {
 /// [`world_points`] into `out` (cleared first): one buffer for a loop over
 /// keyframes, so that each keyframe's few megabytes are not fresh pages.
 fn world_points_into(kf: &KeyframeInput<'_>, out: &mut Vec<[f64; 3]>) {
-    let t = &kf.t_world_keyframe;
-    out.clear();
-    out.extend(kf.points.iter().map(|p| <[f64; 3]>::from(t * Point3::new(p[0] as f64, p[1] as f64, p[2] as f64))));
+    transformed_into(kf.points, &kf.t_world_keyframe, out)
 }
 
 fn origin(kf: &KeyframeInput<'_>) -> [f64; 3] {

@@ -19,7 +19,18 @@ pub use voxel::VoxelKey;
 
 /// `t * p` for every (f32) point, in `f64`: a scan moved into another frame.
 pub fn transformed(points: &[[f32; 3]], t: &Pose) -> Vec<[f64; 3]> {
-    points.iter().map(|p| (t * nalgebra::Point3::new(p[0] as f64, p[1] as f64, p[2] as f64)).into()).collect()
+    let mut out = Vec::with_capacity(points.len());
+    transformed_into(points, t, &mut out);
+    out
+}
+
+/// [`transformed`] into `out` (cleared first), so that a loop over scans can
+/// reuse one buffer.
+pub fn transformed_into(points: &[[f32; 3]], t: &Pose, out: &mut Vec<[f64; 3]>) {
+    out.clear();
+    out.extend(
+        points.iter().map(|p| <[f64; 3]>::from(t * nalgebra::Point3::new(p[0] as f64, p[1] as f64, p[2] as f64))),
+    );
 }
 
 /// A symmetric 3×3 matrix kept as its upper triangle `[xx, xy, xz, yy, yz,
