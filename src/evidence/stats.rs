@@ -211,9 +211,11 @@ pub struct EvidenceConfig {
     /// (moved F1 88.78 → 88.60); simulated sessions F1 OS1-64 90.46 → 90.42,
     /// HDL-64E 93.92 → 93.91, VLP-16 84.85 → 84.93, HDL-32E 87.14 → 87.15,
     /// Avia 93.47 → 93.47. `examples/dor_probe` on SemanticKITTI 04, ray
-    /// casting 0.46-0.51 s → 0.39-0.44 s (timing on the 2-core VM is noisy).
-    /// `bench/change_sites.py`: permanent kept / removed left moved by at
-    /// most 0.05 / 0.26 points (Avia 99.08 / 46.06 → 99.09 / 46.31 %).
+    /// casting 0.46-0.51 s → 0.39-0.51 s, most runs 0.43-0.44 s (timing on
+    /// the 2-core VM is noisy). `bench/change_sites.py` against its previous
+    /// run: permanent structure kept rose by at most 0.02 points on every
+    /// site, removed objects left by at most 0.26 (VLP-16 17.80 → 18.06 %,
+    /// Avia 46.06 → 46.31 %).
     pub one_ray_per_voxel: bool,
     /// Surface test: a patch reaches this many standard deviations of its
     /// points along each in-plane axis.
