@@ -36,6 +36,7 @@
 //! deleted-non-overlap of a run (it left the area sessions cover).
 
 use super::lifelong::{Category, ChangeEvent, LifelongMap, MapVoxel};
+use super::places::{find, union};
 use crate::evidence::grid::{pack, unpack};
 use crate::evidence::surface::plane_normal;
 use crate::geometry::{SYM3_PAIRS, Sym3, UNKNOWN_SPREAD, VoxelKey};
@@ -217,6 +218,15 @@ impl ChangeConfig {
         let support = |n: u32| n.min(n_sat) as f64 / n_sat as f64;
         self.deleted_reliability.of(omega_free, support(free_n)).max(support(no_return_n))
     }
+
+    /// The least `w` with which one session's free evidence alone takes a
+    /// voxel at ε_g's floor out of the static map (0.8 at the defaults:
+    /// `B(0.1, 0.9) = 0.5`).
+    pub fn strong_weight(&self) -> f64 {
+        let (a, t) = (self.eps_g_min, self.static_threshold);
+        let factor = t * (1.0 - a) / (a * (1.0 - t) + t * (1.0 - a));
+        (2.0 * factor - 1.0).clamp(0.0, 1.0)
+    }
 }
 
 impl Default for ChangeConfig {
@@ -346,17 +356,6 @@ pub fn deleted_factor(reliability: f32) -> f64 {
     0.5 + 0.5 * (reliability as f64).clamp(0.0, 1.0)
 }
 
-impl ChangeConfig {
-    /// The least `w` with which one session's free evidence alone takes a
-    /// voxel at ε_g's floor out of the static map (0.8 at the defaults:
-    /// `B(0.1, 0.9) = 0.5`).
-    pub fn strong_weight(&self) -> f64 {
-        let (a, t) = (self.eps_g_min, self.static_threshold);
-        let factor = t * (1.0 - a) / (a * (1.0 - t) + t * (1.0 - a));
-        (2.0 * factor - 1.0).clamp(0.0, 1.0)
-    }
-}
-
 /// What a voxel's piece says, for [`ChangeConfig::piece_min_voxels`].
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct Piece {
@@ -374,32 +373,23 @@ pub struct Piece {
 /// τ_c of it.
 pub fn piece_weights(keys: &[u64], w: &[f32], gone: &[bool], min_voxels: u32) -> Vec<Piece> {
     debug_assert!(keys.windows(2).all(|p| p[0] < p[1]) && keys.len() == w.len() && keys.len() == gone.len());
-    fn root(parent: &mut [u32], mut i: u32) -> u32 {
-        while parent[i as usize] != i {
-            let up = parent[parent[i as usize] as usize];
-            parent[i as usize] = up;
-            i = up;
-        }
-        i
-    }
-    let mut parent: Vec<u32> = (0..keys.len() as u32).collect();
+    let set = KeySet(keys);
+    let mut parent: Vec<usize> = (0..keys.len()).collect();
     for (i, &k) in keys.iter().enumerate() {
         for (_, n) in unpack(k).neighbours(1) {
-            let Some(j) = pack(n).and_then(|n| keys.binary_search(&n).ok()) else { continue };
-            let (a, b) = (root(&mut parent, i as u32), root(&mut parent, j as u32));
-            if a != b {
-                parent[a.max(b) as usize] = a.min(b);
+            if let Some(j) = pack(n).and_then(|n| set.find(n)) {
+                union(&mut parent, i, j);
             }
         }
     }
-    let roots: Vec<u32> = (0..keys.len() as u32).map(|i| root(&mut parent, i)).collect();
-    let mut members: rustc_hash::FxHashMap<u32, (Vec<f32>, usize)> = rustc_hash::FxHashMap::default();
+    let roots: Vec<usize> = (0..keys.len()).map(|i| find(&mut parent, i)).collect();
+    let mut members: rustc_hash::FxHashMap<usize, (Vec<f32>, usize)> = rustc_hash::FxHashMap::default();
     for ((&r, &x), &g) in roots.iter().zip(w).zip(gone) {
         let e = members.entry(r).or_default();
         e.0.push(x);
         e.1 += usize::from(g);
     }
-    let pieces: rustc_hash::FxHashMap<u32, Piece> = members
+    let pieces: rustc_hash::FxHashMap<usize, Piece> = members
         .into_iter()
         .filter(|(_, (ws, _))| ws.len() >= min_voxels.max(1) as usize)
         .map(|(r, (mut ws, gone))| {
