@@ -16,7 +16,8 @@
 //!    per-ray loop and one pass 2 serve both through `MarkLayout`); bits of
 //!    threads meet through atomic `or`s, which commute, so the order rays are
 //!    cast in does not matter (rays run in parallel); a ray that ends at the
-//!    ground frees nothing within the clearance above its end. Rays walk
+//!    ground frees nothing within the clearance above its end, nor one
+//!    that rises to a level surface within it below its end. Rays walk
 //!    only the interest voxels: the keys as 4×4×4 blocks
 //!    ([`BlockMask`], built once per set) let a ray jump over a block with
 //!    none and pass the others' voxels without marking them (the same
@@ -508,39 +509,59 @@ struct KeyframeRays<'a> {
     clearance_ground: Option<&'a GroundLevel>,
 }
 
+/// How far a ray's frees may reach towards its endpoint in z, as voxel
+/// keys: see [`KeyframeRays::clearances`].
+#[derive(Debug, Clone, Copy)]
+struct Clearances {
+    /// Lowest key z freed above a ground end, under `free_clearance_m`.
+    kz_min: i32,
+    /// ... under `vacated_clearance_m` (the band of vacated map voxels).
+    kz_band: i32,
+    /// Highest key z freed below a ceiling end, under `free_clearance_m`
+    /// (`EvidenceConfig::ceiling_clearance`).
+    kz_max: i32,
+}
+
 impl KeyframeRays<'_> {
-    /// The lowest key z the frees of a ray to `p` may reach above a ground
-    /// end, under `free_clearance_m` and under `vacated_clearance_m`.
+    /// How close to its endpoint in z the frees of a ray to `p` may come.
     ///
     /// Free voxels of a downward ray that ends at the ground stop
     /// `free_clearance_m` above its endpoint (centre z ≥ z_min ⇔ key z ≥
     /// kz_min). The ground level is looked up only for rays that drop
-    /// enough to need it.
-    fn clearances(&self, p: &[f64; 3]) -> (i32, i32) {
+    /// enough to need it. With `ceiling_clearance`, the frees of an upward
+    /// ray that ends on a level surface (the underside of a slab) stop as
+    /// far below it (centre z ≤ z_max ⇔ key z ≤ kz_max).
+    fn clearances(&self, p: &[f64; 3]) -> Clearances {
         let (v, cfg) = (self.voxel_m, self.cfg);
+        let key = || voxel_key(p, v);
         let ground_ray = p[2] < self.origin_m[2] - CLEARANCE_MIN_DROP_M
-            && self.clearance_ground.is_none_or(|g| voxel_key(p, v).is_none_or(|k| g.at_ground(&k.0).unwrap_or(true)));
+            && self.clearance_ground.is_none_or(|g| key().is_none_or(|k| g.at_ground(&k.0).unwrap_or(true)));
+        let to_key = |z_m: f64| z_m.clamp(i32::MIN as f64, i32::MAX as f64) as i32;
         let kz_above = |clearance_m: f64| {
-            if ground_ray && clearance_m > 0.0 {
-                ((p[2] + clearance_m) / v - 0.5).ceil().clamp(i32::MIN as f64, i32::MAX as f64) as i32
-            } else {
-                i32::MIN
-            }
+            if ground_ray && clearance_m > 0.0 { to_key(((p[2] + clearance_m) / v - 0.5).ceil()) } else { i32::MIN }
         };
-        (kz_above(cfg.free_clearance_m), kz_above(cfg.vacated_clearance_m))
+        let ceiling_ray = cfg.ceiling_clearance
+            && cfg.free_clearance_m > 0.0
+            && p[2] > self.origin_m[2] + CLEARANCE_MIN_DROP_M
+            && self.shapes.zip(key()).is_some_and(|(shapes, k)| shapes.level_at(&k.0));
+        let kz_max = if ceiling_ray { to_key(((p[2] - cfg.free_clearance_m) / v - 0.5).floor()) } else { i32::MAX };
+        Clearances { kz_min: kz_above(cfg.free_clearance_m), kz_band: kz_above(cfg.vacated_clearance_m), kz_max }
     }
 
     /// Whether the ray to `p` frees voxel `k` (`Some(true)`), frees it only
-    /// under the lower clearance (`Some(false)`), or not at all; `kz` from
+    /// under the lower clearance (`Some(false)`), or not at all; `c` from
     /// [`Self::clearances`]. A voxel with a shape frees only where the ray
     /// crosses it (evidence::surface).
     #[inline]
-    fn frees(&self, k: &VoxelKey, p: &[f64; 3], (kz_min, kz_band): (i32, i32)) -> Option<bool> {
+    fn frees(&self, k: &VoxelKey, p: &[f64; 3], c: Clearances) -> Option<bool> {
+        let z = k.0[2];
         match self.shapes.and_then(|shapes| shapes.at(&k.0)) {
-            Some(s) => ((s.clearance_exempt || k.0[2] >= kz_min) && s.passes(k.0, self.voxel_m, self.origin_m, p))
-                .then_some(true),
-            None if k.0[2] >= kz_min => Some(true),
-            None => (k.0[2] >= kz_band).then_some(false),
+            Some(s) => ((s.clearance_exempt || (c.kz_min..=c.kz_max).contains(&z))
+                && s.passes(k.0, self.voxel_m, self.origin_m, p))
+            .then_some(true),
+            None if z > c.kz_max => None,
+            None if z >= c.kz_min => Some(true),
+            None => (z >= c.kz_band).then_some(false),
         }
     }
 }

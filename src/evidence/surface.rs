@@ -50,7 +50,7 @@
 //! rule. Written by hand: it is a few lines of geometry on the grid's own
 //! sorted keys.
 
-use super::grid::{Box3, KeyIndex, add_points_by_row, packed_key, unpack};
+use super::grid::{Box3, KeyIndex, add_points_by_row, pack, packed_key, unpack};
 use super::stats::EvidenceConfig;
 use crate::geometry::{SYM3_PAIRS, Sym3, sym3_matrix};
 use nalgebra::{SymmetricEigen, Vector3};
@@ -75,6 +75,29 @@ impl Moments {
         let [x, y, z] = d;
         for (m, p) in self.ss.iter_mut().zip([x * x, x * y, x * z, y * y, y * z, z * z]) {
             *m += p;
+        }
+    }
+
+    /// The same points as offsets from a centre `o_m` away (the sums of
+    /// `d + o_m`), so the moments of neighbouring voxels add up.
+    fn shifted(&self, o_m: [f64; 3]) -> Moments {
+        let n = self.n as f64;
+        let s = std::array::from_fn(|a| self.s[a] + n * o_m[a]);
+        let ss = std::array::from_fn(|j| {
+            let (a, b) = SYM3_PAIRS[j];
+            self.ss[j] + self.s[a] * o_m[b] + o_m[a] * self.s[b] + n * o_m[a] * o_m[b]
+        });
+        Moments { s, ss, ..*self }
+    }
+
+    fn merge(&mut self, o: &Moments) {
+        self.n += o.n;
+        self.keyframes += o.keyframes;
+        for (a, b) in self.s.iter_mut().zip(o.s) {
+            *a += b;
+        }
+        for (a, b) in self.ss.iter_mut().zip(o.ss) {
+            *a += b;
         }
     }
 
@@ -267,6 +290,11 @@ pub struct SurfaceShapes {
     /// a table of 165,000 shapes was most of the time rays spent outside
     /// the walk, each a cache miss. The mask's rank is not.
     index: KeyIndex,
+    /// Sorted packed keys of the voxels on a level surface: their points
+    /// and their 26 neighbours' make a plane within about 37° of level
+    /// (`EvidenceConfig::ceiling_clearance`). The neighbours count because
+    /// a grazing ray's endpoint voxel often holds one or two points.
+    level: Vec<u64>,
 }
 
 impl SurfaceShapes {
@@ -285,7 +313,8 @@ impl SurfaceShapes {
         map: &[MapPatch],
         cfg: &EvidenceConfig,
     ) -> SurfaceShapes {
-        let index = KeyIndex::new(interest, &Box3::of_packed(interest));
+        let index_of_interest = KeyIndex::new(interest, &Box3::of_packed(interest));
+        let index = &index_of_interest;
         // Per voxel, its moments and the last keyframe (+1) that added to them.
         let mut acc: Vec<(Moments, u32)> = vec![(Moments::default(), 0); interest.len()];
         add_points_by_row(
@@ -346,7 +375,17 @@ impl SurfaceShapes {
             (keys, shapes) = all.into_iter().unzip();
         }
         let index = KeyIndex::new(&keys, &Box3::of_packed(&keys));
-        SurfaceShapes { keys, shapes, index }
+        let level = if cfg.ceiling_clearance {
+            level_keys(interest, &moments, &index_of_interest, voxel_m)
+        } else {
+            Vec::new()
+        };
+        SurfaceShapes { keys, shapes, index, level }
+    }
+
+    /// Whether voxel `k` holds points of a level surface (see `level`).
+    pub(super) fn level_at(&self, k: &[i32; 3]) -> bool {
+        pack(crate::geometry::VoxelKey(*k)).is_some_and(|p| self.level.binary_search(&p).is_ok())
     }
 
     pub fn len(&self) -> usize {
@@ -367,6 +406,39 @@ impl SurfaceShapes {
     pub(super) fn at(&self, k: &[i32; 3]) -> Option<&VoxelShape> {
         self.index.find_voxel(&self.keys, k).map(|i| &self.shapes[i])
     }
+}
+
+/// The packed keys (sorted, among `interest`) of the voxels that hold
+/// points whose 3×3×3 neighbourhood's points lie on a level plane
+/// ([`plane_normal`]'s test, `|n_z|` ≥ [`GROUND_NORMAL_MIN_Z`]).
+fn level_keys(interest: &[u64], moments: &[Moments], index: &KeyIndex, voxel_m: f64) -> Vec<u64> {
+    interest
+        .par_iter()
+        .zip(moments.par_iter())
+        .filter(|(_, m)| m.n > 0)
+        .filter(|&(&key, _)| {
+            let c = unpack(key).0;
+            let mut sum = Moments::default();
+            for d in 0..27 {
+                let o = [d % 3 - 1, d / 3 % 3 - 1, d / 9 - 1];
+                let Some(i) = pack(crate::geometry::VoxelKey(std::array::from_fn(|a| c[a] + o[a])))
+                    .and_then(|k| index.find(interest, k))
+                else {
+                    continue;
+                };
+                if moments[i].n > 0 {
+                    sum.merge(&moments[i].shifted(o.map(|x| x as f64 * voxel_m)));
+                }
+            }
+            if sum.n < 3 {
+                return false;
+            }
+            let (_, cov) = sum.mean_and_spread();
+            let cov = cov.map(|x| x as f32);
+            plane_normal(&cov, sum.n).is_some_and(|n| n[2].abs() >= GROUND_NORMAL_MIN_Z)
+        })
+        .map(|(&k, _)| k)
+        .collect()
 }
 
 #[cfg(test)]
@@ -597,5 +669,47 @@ mod tests {
         assert!(SurfaceShapes::build(&keys, [scan.clone()].into_iter(), v, &map, &few).get(side_key).is_none());
         let unknown = [MapPatch { spread_m2: crate::geometry::UNKNOWN_SPREAD, ..map[0] }];
         assert!(SurfaceShapes::build(&keys, [scan.clone()].into_iter(), v, &unknown, &on).get(side_key).is_none());
+    }
+
+    /// The ceiling's clearance: rays rising to a slab's underside at
+    /// z 4.05 m (two keyframes' points, a level patch) graze the layer
+    /// beneath, where an earlier session placed the underside a little
+    /// lower. They no longer free that old layer (centre 0.15 m below the
+    /// end), but still free the voxel they cross 0.35 m below it; a ray
+    /// ending on a wall at the same height is not limited, nor is any ray
+    /// with `ceiling_clearance = false`.
+    #[test]
+    fn rays_to_a_slab_underside_do_not_free_the_layer_just_beneath() {
+        use super::super::grid::InterestEvidence;
+        let on = EvidenceConfig::default();
+        assert!(on.ceiling_clearance, "the default");
+        let off = EvidenceConfig { ceiling_clearance: false, ..Default::default() };
+        let v = on.voxel_size_m;
+        let origin = [0.0, 0.1, 1.8];
+        let grid = |f: &dyn Fn(f64, f64) -> [f64; 3]| -> Vec<[f64; 3]> {
+            (0..25).map(|i| f(0.02 + 0.04 * (i % 5) as f64, 0.02 + 0.04 * (i / 5) as f64)).collect()
+        };
+        let underside = grid(&|a, b| [10.0 + a, b, 4.05]);
+        let wall = grid(&|a, b| [10.05, a, 4.0 + b]);
+        // The first ray, to (10.02, 0.02, 4.05), is in z 3.8-4.0 for x 8.9-9.8.
+        let old_layer = packed_key(&[9.5, 0.03, 3.9], v).unwrap();
+        let lower = packed_key(&[8.7, 0.03, 3.7], v).unwrap();
+        let freed = |cfg: &EvidenceConfig, scan: &[[f64; 3]], key: u64| {
+            let mut keys: Vec<u64> = scan.iter().filter_map(|p| packed_key(p, v)).collect();
+            keys.extend([old_layer, lower]);
+            keys.sort_unstable();
+            keys.dedup();
+            let shapes = SurfaceShapes::build(&keys, [scan.to_vec(), scan.to_vec()].into_iter(), v, &[], cfg);
+            let end = unpack(packed_key(&scan[0], v).unwrap()).0;
+            let mut ev = InterestEvidence::new(keys.clone(), v);
+            for kf in 0..2 {
+                ev.add_keyframe(&origin, scan, kf, cfg, Some(&shapes));
+            }
+            (ev.get(key).unwrap().free_n, shapes.level_at(&end))
+        };
+        assert_eq!(freed(&on, &underside, old_layer), (0, true), "the slab's old layer stays");
+        assert_eq!(freed(&off, &underside, old_layer), (2, false), "without the rule both keyframes free it");
+        assert_eq!(freed(&on, &underside, lower), (2, true), "0.35 m beneath the end is freed");
+        assert_eq!(freed(&on, &wall, old_layer), (2, false), "a wall at that height gets no clearance");
     }
 }
