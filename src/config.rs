@@ -104,6 +104,50 @@ impl Config {
         Ok(cfg)
     }
 
+    /// The whole configuration as JSON, every key: what a store records
+    /// ([`crate::store::Store::record_config`]).
+    pub fn to_recorded(&self) -> String {
+        serde_json::to_string(self).expect("a Config serialises")
+    }
+
+    /// The configuration a store recorded (`store` names it in errors).
+    /// Keys added to seam since take their defaults.
+    pub fn from_recorded(json: &str, store: &Path) -> Result<Config, ConfigError> {
+        serde_json::from_str(json).map_err(|e| ConfigError::Parse {
+            path: store.into(),
+            message: format!("the configuration recorded in this store does not parse: {e}"),
+        })
+    }
+
+    /// The settings that differ from `other`'s, as `section.key = ours
+    /// (theirs)` lines, leaving out `[ingest]` (how scans are read, not
+    /// what comes of them).
+    pub fn differences(&self, other: &Config) -> Vec<String> {
+        fn walk(prefix: &str, a: &serde_json::Value, b: &serde_json::Value, out: &mut Vec<String>) {
+            match (a, b) {
+                (serde_json::Value::Object(x), serde_json::Value::Object(y)) => {
+                    for (k, va) in x {
+                        let key = if prefix.is_empty() { k.clone() } else { format!("{prefix}.{k}") };
+                        match y.get(k) {
+                            Some(vb) => walk(&key, va, vb, out),
+                            None => out.push(format!("{key} = {va} (not set)")),
+                        }
+                    }
+                }
+                _ if a != b => out.push(format!("{prefix} = {a} ({b})")),
+                _ => {}
+            }
+        }
+        let json = |c: &Config| {
+            let mut v = serde_json::to_value(c).expect("a Config serialises");
+            v.as_object_mut().map(|o| o.remove("ingest"));
+            v
+        };
+        let mut out = Vec::new();
+        walk("", &json(self), &json(other), &mut out);
+        out
+    }
+
     fn validate(&self, path: &Path) -> Result<(), ConfigError> {
         let bad = |m: String| Err(ConfigError::Invalid { path: path.into(), message: m });
         if !(self.submap.submap_length_m > 0.0 && self.submap.submap_length_m.is_finite()) {
@@ -170,6 +214,22 @@ mod tests {
         assert!(e.to_string().contains("graph.loop_sigma_trans_m"), "{e}");
         let e = Config::from_toml("[loops.dop]\nrho_mx = 4.0\n", Path::new("c.toml")).unwrap_err();
         assert!(e.to_string().contains("rho_mx"), "{e}");
+    }
+
+    /// What a store records reads back as the same configuration, and the
+    /// differences name exactly the keys that differ, `[ingest]` aside.
+    #[test]
+    fn recorded_config_round_trips_and_differences_name_the_keys() {
+        let text = "[submap]\nsubmap_length_m = 12.5\n[loops.dop]\nrho_max = 4.0\n[ingest]\nread_batch_scans = 3\n";
+        let c = Config::from_toml(text, Path::new("c.toml")).unwrap();
+        let back = Config::from_recorded(&c.to_recorded(), Path::new("site.seam")).unwrap();
+        assert_eq!(back, c);
+        assert!(back.differences(&c).is_empty());
+        let mut d = c.differences(&Config::default());
+        d.sort();
+        assert_eq!(d, vec!["loops.dop.rho_max = 4.0 (6.0)".to_string(), "submap.submap_length_m = 12.5 (20.0)".into()]);
+        let e = Config::from_recorded("{\"submap\": 3}", Path::new("site.seam")).unwrap_err();
+        assert!(e.to_string().contains("site.seam") && e.to_string().contains("recorded"), "{e}");
     }
 
     /// The nested sections of the module doc parse and land where they say.

@@ -37,6 +37,7 @@ pub fn exit_kind(err: &anyhow::Error) -> ExitKind {
             return match e {
                 IngestError::Store(s) => store_kind(s),
                 IngestError::Read(_) | IngestError::NameTaken { .. } => ExitKind::Data,
+                IngestError::ConfigChanged { .. } => ExitKind::Usage,
             };
         }
         if let Some(e) = cause.downcast_ref::<StoreError>() {

@@ -24,7 +24,7 @@ pub struct InitArgs {
     pub name: Option<String>,
 }
 
-pub fn run(ctx: &Ctx, a: InitArgs) -> anyhow::Result<()> {
+pub fn run(ctx: &Ctx, a: InitArgs, config_given: bool) -> anyhow::Result<()> {
     if !(a.voxel.is_finite() && a.voxel > 0.0 && a.voxel <= 10.0) {
         return Err(UsageError(format!("--voxel {} must be a size in metres in (0, 10]", a.voxel)).into());
     }
@@ -41,6 +41,10 @@ pub fn run(ctx: &Ctx, a: InitArgs) -> anyhow::Result<()> {
         a.store.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "site".into())
     });
     let store = Store::create(&a.store, &InitOptions { site_name, crs, voxel_size_m: a.voxel })?;
+    if config_given {
+        // Later commands on the store run with it; the first ingest binds it.
+        store.record_config(&ctx.config.to_recorded())?;
+    }
     let meta = store.meta()?;
     if json(ctx) {
         print_json(&serde_json::json!({ "store": a.store, "meta": meta }))?;

@@ -39,7 +39,9 @@ pub struct Cli {
     /// No progress bars or log lines on stderr.
     #[arg(long, short, global = true)]
     pub quiet: bool,
-    /// TOML file overriding the default configuration (only the keys it names).
+    /// TOML file overriding the default configuration (only the keys it
+    /// names). Without it, a store's commands use the configuration its
+    /// first session was ingested with; later ingests must match it.
     #[arg(long, global = true, value_name = "FILE")]
     pub config: Option<PathBuf>,
     #[command(subcommand)]
@@ -126,14 +128,55 @@ pub fn main() -> std::process::ExitCode {
     }
 }
 
+/// The store a command works on, when it has one (not `init`'s: that one
+/// does not exist yet).
+fn store_of(command: &Command) -> Option<&std::path::Path> {
+    use eval::EvalCommand as E;
+    use zones::ZonesCommand as Z;
+    Some(match command {
+        Command::Init(_) | Command::Simulate(_) | Command::Demo(_) => return None,
+        Command::Ingest(a) => &a.store,
+        Command::Sessions(a) | Command::Info(a) => &a.store,
+        Command::Poses(a) => &a.store,
+        Command::Check(a) => &a.store,
+        Command::Eval(E::Changes(a)) => &a.store,
+        Command::Eval(E::Dor(a)) => &a.store,
+        Command::Eval(E::Align(a)) => &a.store,
+        Command::Export(a) => &a.store,
+        Command::Rebuild(a) => &a.store,
+        Command::Query(a) => &a.store,
+        Command::Zones(Z::Add(a)) => &a.store,
+        Command::Zones(Z::List(a)) => &a.store,
+        Command::Zones(Z::Rm(a)) => &a.store,
+        Command::Render(a) => &a.store,
+        Command::Report(a) => &a.store,
+    })
+}
+
+/// The configuration a command runs with: `--config`'s file over the
+/// defaults; without `--config`, the one the command's store recorded at
+/// its first ingest (or `init --config`), so a store keeps its settings
+/// from one command to the next. A store that cannot be read here is left
+/// to the command, which reports it.
+fn resolve_config(cli: &Cli) -> anyhow::Result<crate::config::Config> {
+    use crate::config::Config;
+    if let Some(path) = &cli.config {
+        return Ok(Config::from_file(path)?);
+    }
+    let recorded = store_of(&cli.command)
+        .and_then(|root| crate::store::Store::open_read_only(root).ok())
+        .and_then(|store| Some((store.recorded_config().ok()??, store.root().to_path_buf())));
+    Ok(match recorded {
+        Some((json, root)) => Config::from_recorded(&json, &root)?,
+        None => Config::default(),
+    })
+}
+
 fn run(cli: Cli) -> anyhow::Result<()> {
-    let config = match &cli.config {
-        Some(path) => crate::config::Config::from_file(path)?,
-        None => crate::config::Config::default(),
-    };
+    let config = resolve_config(&cli)?;
     let ctx = Ctx { format: cli.format, quiet: cli.quiet, config };
     match cli.command {
-        Command::Init(a) => init::run(&ctx, a),
+        Command::Init(a) => init::run(&ctx, a, cli.config.is_some()),
         Command::Ingest(a) => ingest::run(&ctx, a),
         Command::Sessions(a) => sessions::run_sessions(&ctx, a),
         Command::Info(a) => sessions::run_info(&ctx, a),

@@ -2,8 +2,8 @@
 //!
 //! Recomputes everything from the raw scans into a new store: every session
 //! of `site.seam`, in its order, from its recorded folder, with its name and
-//! recorded options, with the configuration of `--config` (the store does not
-//! record one). Every folder is checked (exists, same content hash) before
+//! recorded options, with the configuration the store recorded at its first
+//! ingest, or `--config`'s to recompute with other settings. Every folder is checked (exists, same content hash) before
 //! anything is written; the source store is only read.
 
 use super::output::{Bars, json, log, print_json, print_table, thousands};

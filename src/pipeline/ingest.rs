@@ -21,6 +21,11 @@ pub enum IngestError {
         "session name {name:?} is already used by session {existing} in this store\n  hint: pass --name with another name"
     )]
     NameTaken { name: String, existing: i64 },
+    #[error(
+        "{store}: this store's sessions were ingested with another configuration; these settings differ (given, then the store's in brackets):\n    {}\n  hint: run without --config to ingest with the store's configuration, or `seam rebuild {store} --out NEW --config FILE` to recompute every session with another",
+        differences.join("\n    ")
+    )]
+    ConfigChanged { store: String, differences: Vec<String> },
 }
 
 #[derive(Debug, Clone, Default)]
@@ -111,6 +116,26 @@ fn validate_scans(src: &SessionSource, progress: &dyn Progress) -> Result<Vec<us
     counts
 }
 
+/// Checks `config` against the one the store recorded once it holds a
+/// session: every session of a store is ingested with one configuration,
+/// or its lifelong map would mix settings (and `seam rebuild` could not
+/// reproduce it). The first session's `scans` step records the
+/// configuration in the transaction that creates the session; before that
+/// (or in a store from before seam recorded one) any configuration goes.
+fn check_config(store: &Store, config: &Config) -> Result<(), IngestError> {
+    if store::next_session_id(store.conn())? == 1 {
+        return Ok(());
+    }
+    let Some(json) = store.recorded_config()? else { return Ok(()) };
+    let recorded = Config::from_recorded(&json, store.root())
+        .map_err(|e| store::StoreError::Corrupt { path: store.root().to_path_buf(), message: e.to_string() })?;
+    let differences = config.differences(&recorded);
+    if differences.is_empty() {
+        return Ok(());
+    }
+    Err(IngestError::ConfigChanged { store: store.root().display().to_string(), differences })
+}
+
 /// Ingests the session in `dir` into `store`.
 pub fn ingest_session(
     store: &mut Store,
@@ -173,6 +198,7 @@ pub fn ingest_session(
         receipt.wall_s = t0.elapsed().as_secs_f64();
         return Ok(receipt);
     }
+    check_config(store, config)?;
 
     let mut ctx = StepCtx {
         store,

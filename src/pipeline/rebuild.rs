@@ -11,8 +11,9 @@
 //!   `initial_guess`): the guess itself is not stored, so its recorded
 //!   placement (the guess after ICP) is given as the guess, and a note says so.
 //!
-//! The configuration is the caller's: a store does not record the
-//! configuration its sessions were ingested with.
+//! The configuration is the caller's: the CLI passes the one the source
+//! store recorded at its first ingest unless `--config` gives another; the
+//! new store records the one it was rebuilt with.
 //!
 //! Every source folder is checked before anything is written: it must exist
 //! and hash to the recorded `content_hash`. The source store is only ever

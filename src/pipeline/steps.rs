@@ -124,6 +124,7 @@ fn store_scans(ctx: &mut StepCtx<'_>, step: &'static str, seq: i64) -> Result<Va
     let source_dir = ctx.src.dir.display().to_string();
     let root = ctx.store.root().to_path_buf();
     let (name, hash) = (ctx.name.clone(), ctx.content_hash.clone());
+    let config_json = ctx.config.to_recorded();
     let new = NewSession {
         name: &name,
         content_hash: &hash,
@@ -137,6 +138,11 @@ fn store_scans(ctx: &mut StepCtx<'_>, step: &'static str, seq: i64) -> Result<Va
     };
     ctx.commit(step, seq, (&started_at, t0), |tx| {
         let session = store::insert_session(tx, &new)?;
+        // The first session binds the store to its configuration (a store
+        // from before seam recorded one is bound by its next session).
+        if session.0 == 1 || store::recorded_config(tx, &root)?.is_none() {
+            store::record_config(tx, &root, &config_json)?;
+        }
         let file_id = store::insert_file(tx, &root, &record, Some(session.0))?;
         store::insert_keyframes(tx, session, file_id, &kfs)?;
         Ok((session, json!({ "file": record.rel_path, "bytes": record.size_bytes, "points": points, "scans": n })))

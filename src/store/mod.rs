@@ -100,6 +100,26 @@ pub struct InitOptions {
     pub voxel_size_m: f64,
 }
 
+/// The `meta` key of the configuration the sessions were ingested with.
+const CONFIG_KEY: &str = "config_json";
+
+/// [`Store::recorded_config`] inside a transaction.
+pub fn recorded_config(conn: &Connection, root: &Path) -> Result<Option<String>, StoreError> {
+    use rusqlite::OptionalExtension;
+    conn.query_row("SELECT value FROM meta WHERE key = ?1", [CONFIG_KEY], |r| r.get::<_, String>(0))
+        .optional()
+        .map_err(|e| sql(root, e))
+}
+
+/// [`Store::record_config`] inside a transaction (`root` names the store in
+/// errors): the first session's `scans` step records its configuration in
+/// the transaction that creates the session.
+pub fn record_config(conn: &Connection, root: &Path, json: &str) -> Result<(), StoreError> {
+    conn.execute("INSERT OR REPLACE INTO meta(key, value) VALUES (?1, ?2)", (CONFIG_KEY, json))
+        .map(|_| ())
+        .map_err(|e| sql(root, e))
+}
+
 /// What `meta` holds.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct StoreMeta {
@@ -209,6 +229,19 @@ impl Store {
             tool_version: get("tool_version")?,
             created_at: get("created_at")?,
         })
+    }
+
+    /// The configuration the store's sessions were ingested with, as the
+    /// JSON [`record_config`](Self::record_config) wrote; `None` before
+    /// the first ingest (or in a store from before seam recorded it).
+    pub fn recorded_config(&self) -> Result<Option<String>, StoreError> {
+        recorded_config(&self.conn, &self.root)
+    }
+
+    /// Records (or replaces) the configuration the store's sessions are
+    /// ingested with: `json` is the whole configuration, every key.
+    pub fn record_config(&self, json: &str) -> Result<(), StoreError> {
+        record_config(&self.conn, &self.root, json)
     }
 
     /// Removes `*.tmp-<pid>` files under `data/`: half-written files of a
