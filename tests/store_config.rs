@@ -1,7 +1,7 @@
 //! A store records the configuration its first session was ingested with:
 //! later commands without `--config` run with it, an ingest with other
 //! settings is refused (exit 2, naming each key, the store untouched), and
-//! `seam rebuild` without `--config` reproduces the store.
+//! `seam rebuild` without `--config` reproduces the store; `seam info` shows it.
 
 mod common;
 use common::*;
@@ -66,6 +66,14 @@ fn the_first_ingest_binds_the_store_to_its_configuration() {
     let o = run(&["--config", s(&a_batch), "ingest", s(&store), s(&z)]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert_eq!(submap_lengths(&store), vec![(1, 4.0), (2, 4.0), (3, 4.0)]);
+    // `seam info` says how the recorded configuration departs from the defaults.
+    let o = run(&["info", s(&store), "--format", "json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let info: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    assert_eq!(info["config_not_default"], serde_json::json!(["submap.submap_length_m = 4.0 (20.0)"]));
+    assert_eq!(info["config"]["submap"]["submap_length_m"], 4.0);
+    let o = run(&["info", s(&store)]);
+    assert!(stdout(&o).contains("submap.submap_length_m = 4.0 (20.0)"), "{}", stdout(&o));
 
     // A rebuild without --config recomputes with the recorded settings: the same store.
     let copy = t.join("copy.seam");

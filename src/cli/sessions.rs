@@ -54,12 +54,20 @@ pub fn run_info(ctx: &Ctx, a: StoreArg) -> anyhow::Result<()> {
     let points: i64 = store::sessions(store.conn())?.iter().map(|s| s.point_count).sum();
     let bytes = dir_size(store.root());
     let alignment = alignment_rows(&store)?;
+    // The configuration the sessions were ingested with, and how it
+    // departs from seam's defaults (`None` before the first ingest).
+    let config = match store.recorded_config()? {
+        Some(text) => Some(crate::config::Config::from_recorded(&text, store.root())?),
+        None => None,
+    };
+    let not_default = config.as_ref().map(|c| c.differences(&crate::config::Config::default()));
     if json(ctx) {
         let counts: serde_json::Map<String, serde_json::Value> =
             counts.iter().map(|(k, v)| (k.clone(), (*v).into())).collect();
         return print_json(&serde_json::json!({
             "meta": meta, "tables": counts, "points": points, "size_bytes": bytes, "alignment": alignment,
             "bytes_per_million_points": if points > 0 { bytes as f64 * 1e6 / points as f64 } else { 0.0 },
+            "config": config, "config_not_default": not_default,
         }));
     }
     println!("store           {}", a.store.display());
@@ -78,6 +86,16 @@ pub fn run_info(ctx: &Ctx, a: StoreArg) -> anyhow::Result<()> {
         String::new()
     };
     println!("size            {:.1} MB{per_m}", bytes as f64 / 1e6);
+    match &not_default {
+        None => println!("config          not recorded yet (the first ingest records it)"),
+        Some(d) if d.is_empty() => println!("config          seam's defaults"),
+        Some(d) => {
+            println!("config          seam's defaults but (value, then the default in brackets):");
+            for line in d {
+                println!("                  {line}");
+            }
+        }
+    }
     if !alignment.is_empty() {
         println!();
         let rows: Vec<Vec<String>> = alignment
