@@ -51,7 +51,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 /// that end at least this far below the sensor (and, by default, at the
 /// ground level, `evidence::ground`): not walls seen level, whose rays
 /// would otherwise lose every free voxel.
-const CLEARANCE_MIN_DROP_M: f64 = 0.5;
+pub(super) const CLEARANCE_MIN_DROP_M: f64 = 0.5;
 
 pub(super) const HIT: u64 = 1;
 pub(super) const FREE: u64 = 2;

@@ -202,8 +202,10 @@ pub fn generate(
         Vec::new()
     };
     drop(per_kf);
+    let level_above_m = keyframes.iter().map(|k| k.t_world_keyframe.translation.vector.z).fold(f64::INFINITY, f64::min)
+        + super::grid::CLEARANCE_MIN_DROP_M;
     let shapes = (cfg.free_test == FreeTest::Surface)
-        .then(|| SurfaceShapes::build(session.keys(), keyframes.iter().map(world_points), v, map, cfg));
+        .then(|| SurfaceShapes::build(session.keys(), keyframes.iter().map(world_points), v, map, level_above_m, cfg));
     let mut stats = GenerationStats {
         keyframes: keyframes.len(),
         points: keyframes.iter().map(|k| k.points.len()).sum(),

@@ -305,12 +305,16 @@ impl SurfaceShapes {
     ///
     /// `map` gives the patches of earlier sessions' map voxels (keys among
     /// `interest`): those none of the scans' points fall into get their
-    /// patch, marked [`VoxelShape::from_map`].
+    /// patch, marked [`VoxelShape::from_map`]. Only voxels reaching above
+    /// `level_above_m` (world z) are tested for a level surface: a ceiling
+    /// ray ends higher than that (the lowest sensor origin plus the
+    /// clearance's minimum rise), and most voxels are ground below it.
     pub fn build(
         interest: &[u64],
         scans: impl Iterator<Item = Vec<[f64; 3]>> + Send,
         voxel_m: f64,
         map: &[MapPatch],
+        level_above_m: f64,
         cfg: &EvidenceConfig,
     ) -> SurfaceShapes {
         let index_of_interest = KeyIndex::new(interest, &Box3::of_packed(interest));
@@ -376,7 +380,7 @@ impl SurfaceShapes {
         }
         let index = KeyIndex::new(&keys, &Box3::of_packed(&keys));
         let level = if cfg.ceiling_clearance {
-            level_keys(interest, &moments, &index_of_interest, voxel_m)
+            level_keys(interest, &moments, &index_of_interest, voxel_m, level_above_m)
         } else {
             Vec::new()
         };
@@ -410,12 +414,14 @@ impl SurfaceShapes {
 
 /// The packed keys (sorted, among `interest`) of the voxels that hold
 /// points whose 3×3×3 neighbourhood's points lie on a level plane
-/// ([`plane_normal`]'s test, `|n_z|` ≥ [`GROUND_NORMAL_MIN_Z`]).
-fn level_keys(interest: &[u64], moments: &[Moments], index: &KeyIndex, voxel_m: f64) -> Vec<u64> {
+/// ([`plane_normal`]'s test, `|n_z|` ≥ [`GROUND_NORMAL_MIN_Z`]), of those
+/// whose top lies above `above_m`.
+fn level_keys(interest: &[u64], moments: &[Moments], index: &KeyIndex, voxel_m: f64, above_m: f64) -> Vec<u64> {
     interest
         .par_iter()
         .zip(moments.par_iter())
         .filter(|(_, m)| m.n > 0)
+        .filter(|&(&key, _)| (unpack(key).0[2] as f64 + 1.0) * voxel_m > above_m)
         .filter(|&(&key, _)| {
             let c = unpack(key).0;
             let mut sum = Moments::default();
@@ -528,7 +534,8 @@ mod tests {
         interest.push(packed_key(&[3.0, 3.0, 3.0], v).unwrap());
         interest.sort_unstable();
         interest.dedup();
-        let shapes = SurfaceShapes::build(&interest, [a.to_vec(), b.to_vec()].into_iter(), v, &[], &cfg);
+        let shapes =
+            SurfaceShapes::build(&interest, [a.to_vec(), b.to_vec()].into_iter(), v, &[], f64::NEG_INFINITY, &cfg);
         assert_eq!(shapes.len(), 1, "the voxel without points has no shape");
         let k = packed_key(&pts[0], v).unwrap();
         let got = shapes.get(k).unwrap();
@@ -555,8 +562,8 @@ mod tests {
         // Two keyframes hit the tube, so its voxel has a shape; one keyframe
         // alone would leave it to the voxel rule.
         let (a, b) = pts.split_at(30);
-        let two = SurfaceShapes::build(&keys, [a.to_vec(), b.to_vec()].into_iter(), v, &[], &cfg);
-        let one = SurfaceShapes::build(&keys, [pts.clone()].into_iter(), v, &[], &cfg);
+        let two = SurfaceShapes::build(&keys, [a.to_vec(), b.to_vec()].into_iter(), v, &[], f64::NEG_INFINITY, &cfg);
+        let one = SurfaceShapes::build(&keys, [pts.clone()].into_iter(), v, &[], f64::NEG_INFINITY, &cfg);
         assert!(two.get(key).is_some() && one.get(key).is_none());
         let free_after = |shapes: Option<&SurfaceShapes>, y: f64| {
             let mut ev = InterestEvidence::new(keys.clone(), v);
@@ -584,14 +591,15 @@ mod tests {
         let mut keys: Vec<u64> = legs.iter().chain(&ring).filter_map(|p| packed_key(p, v)).collect();
         keys.sort_unstable();
         keys.dedup();
-        let shapes = SurfaceShapes::build(&keys, [legs.clone(), ring.clone()].into_iter(), v, &[], &cfg);
+        let shapes =
+            SurfaceShapes::build(&keys, [legs.clone(), ring.clone()].into_iter(), v, &[], f64::NEG_INFINITY, &cfg);
         let leg = shapes.get(packed_key(&legs[0], v).unwrap()).expect("a patch gets a shape");
         assert!(leg.clearance_exempt);
         assert!(shapes.get(packed_key(&ring[0], v).unwrap()).is_none(), "a line keeps the voxel rule");
         // Seen through later, to the ground behind, below the clearance.
         assert!(leg.passes(unpack(packed_key(&legs[0], v).unwrap()).0, v, &[0.0, 0.1, 1.7], &[10.7, 0.1, 0.0]));
         let off = EvidenceConfig { surface_single_sigma_m: 0.0, ..cfg.clone() };
-        let none = SurfaceShapes::build(&keys, [legs, ring].into_iter(), v, &[], &off);
+        let none = SurfaceShapes::build(&keys, [legs, ring].into_iter(), v, &[], f64::NEG_INFINITY, &off);
         assert!(none.is_empty());
     }
 
@@ -644,7 +652,7 @@ mod tests {
         let origin = [0.0, 0.1, 1.7];
         let scan = vec![under, end];
         let freed = |cfg: &EvidenceConfig, key: u64| {
-            let shapes = SurfaceShapes::build(&keys, [scan.clone()].into_iter(), v, &map, cfg);
+            let shapes = SurfaceShapes::build(&keys, [scan.clone()].into_iter(), v, &map, f64::NEG_INFINITY, cfg);
             let mut ev = InterestEvidence::new(keys.clone(), v);
             ev.add_keyframe(&origin, &scan, 3, cfg, Some(&shapes));
             (ev.get(key).unwrap().free_n, shapes.get(key).copied())
@@ -657,7 +665,7 @@ mod tests {
         // The stored ground behind the side: a ray to (12.5, 0.1, 0.02) grazes it
         // without crossing its plane.
         let graze = [12.5, 0.1, 0.02];
-        let shapes = SurfaceShapes::build(&keys, [scan.clone()].into_iter(), v, &map, &on);
+        let shapes = SurfaceShapes::build(&keys, [scan.clone()].into_iter(), v, &map, f64::NEG_INFINITY, &on);
         let g = shapes.get(ground_key).unwrap();
         assert!(!g.passes(unpack(ground_key).0, v, &origin, &graze));
         // A stored voxel this session hits does not get the stored patch (one
@@ -666,9 +674,17 @@ mod tests {
         assert_eq!(map[2].key, packed_key(&under, v).unwrap());
         assert!(shapes.get(map[2].key).is_none());
         let few = EvidenceConfig { surface_map_min_points: 26, ..on.clone() };
-        assert!(SurfaceShapes::build(&keys, [scan.clone()].into_iter(), v, &map, &few).get(side_key).is_none());
+        assert!(
+            SurfaceShapes::build(&keys, [scan.clone()].into_iter(), v, &map, f64::NEG_INFINITY, &few)
+                .get(side_key)
+                .is_none()
+        );
         let unknown = [MapPatch { spread_m2: crate::geometry::UNKNOWN_SPREAD, ..map[0] }];
-        assert!(SurfaceShapes::build(&keys, [scan.clone()].into_iter(), v, &unknown, &on).get(side_key).is_none());
+        assert!(
+            SurfaceShapes::build(&keys, [scan.clone()].into_iter(), v, &unknown, f64::NEG_INFINITY, &on)
+                .get(side_key)
+                .is_none()
+        );
     }
 
     /// The ceiling's clearance: rays rising to a slab's underside at
@@ -699,7 +715,8 @@ mod tests {
             keys.extend([old_layer, lower]);
             keys.sort_unstable();
             keys.dedup();
-            let shapes = SurfaceShapes::build(&keys, [scan.to_vec(), scan.to_vec()].into_iter(), v, &[], cfg);
+            let shapes =
+                SurfaceShapes::build(&keys, [scan.to_vec(), scan.to_vec()].into_iter(), v, &[], f64::NEG_INFINITY, cfg);
             let end = unpack(packed_key(&scan[0], v).unwrap()).0;
             let mut ev = InterestEvidence::new(keys.clone(), v);
             for kf in 0..2 {
