@@ -176,6 +176,9 @@ impl Config {
         positive("loops.gicp.voxel_size_m", l.gicp.voxel_size_m)?;
         positive("loops.dop.voxel_size_m", l.dop.voxel_size_m)?;
         positive("coarse.map_voxel_m", self.coarse.map_voxel_m)?;
+        if !(l.local_travel_m >= 0.0 && l.local_travel_m.is_finite()) {
+            return bad(format!("loops.local_travel_m = {} must be 0 (off) or a positive length", l.local_travel_m));
+        }
         if !(0.0..=1.0).contains(&l.min_inlier_ratio) {
             return bad(format!("loops.min_inlier_ratio = {} must be within [0, 1]", l.min_inlier_ratio));
         }

@@ -22,13 +22,17 @@ use std::path::Path;
 fn ingested_store(tmp: &Path) -> std::path::PathBuf {
     let summary = simulate(&tmp.join("sim"), 2, 30, 7, &[]);
     let root = tmp.join("site.seam");
-    let o = run(&["init", root.to_str().unwrap(), "--crs", "EPSG:32652"]);
+    // No local loop edges: the loop candidates are the three stored below.
+    let config = tmp.join("no-local-edges.toml");
+    std::fs::write(&config, "[loops]\nlocal_travel_m = 0.0\n").unwrap();
+    let o = run(&["--config", config.to_str().unwrap(), "init", root.to_str().unwrap(), "--crs", "EPSG:32652"]);
     assert!(o.status.success(), "{}", stderr(&o));
     ingest_all(&root, &summary);
     root
 }
 
-/// Walks this short find no loop candidates; three stored candidates (an
+/// Walks this short find no revisit and, with local edges off, no loop
+/// candidates at all; three stored candidates (an
 /// accepted inter-session loop, a rejection with infinite ρ, an intra one)
 /// give `loop_edges` rows to read.
 fn add_loop_candidates(root: &Path) {

@@ -46,7 +46,8 @@ fn sessions_are_aligned_jointly_within_a_decimetre() {
     assert!(loops["median_error_m"].as_f64().unwrap() < 0.02, "{loops}");
     for s in report["sessions"].as_array().unwrap() {
         let ate = s["ate_rmse_m"].as_f64().unwrap();
-        assert!(ate <= 0.10, "session {} ATE {ate:.3} m > 0.10 m: {report}", s["session"]);
+        // 9-11 mm with the local loop edges, 29-71 mm without them.
+        assert!(ate <= 0.03, "session {} ATE {ate:.3} m > 0.03 m: {report}", s["session"]);
     }
     // Frozen earlier sessions (LT-mapper's assumption) keep their drift:
     // joint optimisation must beat them after the last ingest.
@@ -63,8 +64,8 @@ fn sessions_are_aligned_jointly_within_a_decimetre() {
     assert_eq!(lines.count(), 4 * 150);
 
     // Change detection on the same site, against the simulator's objects.
-    // Removed objects' leftovers are not held to their goal (≤ 5 %): seam
-    // leaves too many of them static today (see `seam eval changes`).
+    // Removed objects' leftovers are held below 6 %, not to their goal
+    // (≤ 5 %), which this site meets only narrowly (below).
     let report = json_of(&["eval", "changes", st, "--gt", sim.to_str().unwrap(), "--format", "json"]);
     let goal = |name: &str| {
         let g = report["goals"].as_array().unwrap().iter().find(|g| g["metric"] == name).unwrap().clone();
@@ -80,13 +81,15 @@ fn sessions_are_aligned_jointly_within_a_decimetre() {
         assert!(met, "{name}: {value:.4} misses its goal: {}", report["goals"]);
     }
     // Seeing a removed object's space free must lower what is left of it:
-    // 14.2 % here (4 × 150 keyframes); 17.3 % when first written, before
-    // `[change] off_surface_m` (a removed pallet's layer above the ground
-    // stayed coexist) and the evidence defaults of `n_sat` 2; 30-46 % on
-    // such sites under `omega_or_half_support`.
+    // 4.90 % here (4 × 150 keyframes) with the local loop edges and the
+    // map's ground needing crossing, 6.10 % before them; 14.2 % before the
+    // pieces, 17.3 % when first written, before `[change] off_surface_m`
+    // (a removed pallet's layer above the ground stayed coexist) and the
+    // evidence defaults of `n_sat` 2; 30-46 % on such sites under
+    // `omega_or_half_support`.
     let (left, _) = goal("removed-object voxels left in the static map");
     eprintln!("removed-object voxels left static: {left:.4}");
-    assert!(left < 0.16, "removed objects stay in the static map: {left:.3}");
+    assert!(left < 0.06, "removed objects stay in the static map: {left:.3}");
 }
 
 /// A session that shares nothing with the store is kept, unaligned, with the

@@ -7,7 +7,10 @@
 //!   an unaligned session: its estimate says nothing about where it is.
 //! - **Intra-session**: the same keyframes are paired with the nearest
 //!   keyframe of their own session's past that is at least
-//!   `intra_min_travel_m` of travel behind (a revisit, not a neighbour).
+//!   `intra_min_travel_m` of travel behind (a revisit, not a neighbour),
+//!   and with the first keyframe `local_travel_m` of travel behind (a local
+//!   edge: it measures the input odometry's drift where nothing is
+//!   revisited).
 //!
 //! Each candidate registers the source keyframe's scan (sensor frame) against
 //! the target keyframe's local map (it and its ±`neighbours` neighbours in
@@ -100,19 +103,35 @@ pub fn inter_candidates(sessions: &[SessionState], new: usize, cfg: &LoopConfig)
     kept
 }
 
-/// Intra-session candidates (revisits) of session `new`.
+/// Intra-session candidates of session `new`: revisits, and the local edge
+/// of each stride-th keyframe (`LoopConfig::local_travel_m`), revisit first.
 pub fn intra_candidates(sessions: &[SessionState], new: usize, cfg: &LoopConfig) -> Vec<Candidate> {
     let kfs = &sessions[new].keyframes;
+    let distance = |i: usize, j: usize| {
+        (kfs[i].t_world_keyframe.translation.vector - kfs[j].t_world_keyframe.translation.vector).norm()
+    };
     let mut out = Vec::new();
     for j in (0..kfs.len()).step_by(cfg.keyframe_stride.max(1)) {
-        let pj = kfs[j].t_world_keyframe.translation.vector;
-        let best = (0..j)
-            .take_while(|&i| kfs[j].travel_m - kfs[i].travel_m >= cfg.intra_min_travel_m)
-            .map(|i| (i, (kfs[i].t_world_keyframe.translation.vector - pj).norm()))
+        let behind = |i: usize| kfs[j].travel_m - kfs[i].travel_m;
+        let revisit = (0..j)
+            .take_while(|&i| behind(i) >= cfg.intra_min_travel_m)
+            .map(|i| (i, distance(i, j)))
             .filter(|&(_, d)| d <= cfg.radius_m)
             .min_by(|a, b| a.1.total_cmp(&b.1));
-        if let Some((i, d)) = best {
+        if let Some((i, d)) = revisit {
             out.push(Candidate { kind: LoopKind::Intra, source: (new, j), target: (new, i), distance_m: d });
+        }
+        if cfg.local_travel_m > 0.0
+            && let Some(i) = (0..j).rev().find(|&i| behind(i) >= cfg.local_travel_m)
+            && revisit.is_none_or(|(r, _)| r != i)
+            && distance(i, j) <= cfg.radius_m
+        {
+            out.push(Candidate {
+                kind: LoopKind::Intra,
+                source: (new, j),
+                target: (new, i),
+                distance_m: distance(i, j),
+            });
         }
     }
     out
@@ -229,4 +248,92 @@ pub fn evaluate(
     }
     progress.end();
     Ok(rows.into_iter().flatten().collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::align::KeyframeState;
+    use crate::store::{KeyframeId, KeyframeRow, SessionRow};
+    use nalgebra::Isometry3;
+
+    /// A session walking `xy` (one keyframe per point), travel along it.
+    fn session(xy: &[[f64; 2]]) -> SessionState {
+        let mut travel = 0.0;
+        let keyframes = xy
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                if i > 0 {
+                    travel += ((p[0] - xy[i - 1][0]).powi(2) + (p[1] - xy[i - 1][1]).powi(2)).sqrt();
+                }
+                let pose = Isometry3::translation(p[0], p[1], 0.0);
+                let row = KeyframeRow {
+                    keyframe_id: KeyframeId(i as i64 + 1),
+                    session_id: SessionId(1),
+                    keyframe_index: i as i64,
+                    source_file: String::new(),
+                    stamp_s: None,
+                    point_count: 0,
+                    scan_file_id: 0,
+                    scan_row_group: 0,
+                    t_session_keyframe: pose,
+                    submap_id: None,
+                };
+                KeyframeState { row, t_world_keyframe: pose, travel_m: travel }
+            })
+            .collect();
+        let row = SessionRow {
+            session_id: SessionId(1),
+            name: "s1".into(),
+            content_hash: String::new(),
+            source_dir: String::new(),
+            layout: "kitti".into(),
+            date: None,
+            sensor_model: None,
+            fov_json: None,
+            keyframe_count: xy.len() as i64,
+            point_count: 0,
+            status: "ingesting".into(),
+            created_at: String::new(),
+            completed_at: None,
+        };
+        SessionState { row, keyframes, aligned: true }
+    }
+
+    fn pairs(c: &[Candidate]) -> Vec<(usize, usize)> {
+        c.iter().map(|c| (c.source.1, c.target.1)).collect()
+    }
+
+    #[test]
+    fn a_straight_walk_gets_local_edges_the_set_travel_back() {
+        // 1 m apart along x: keyframe j's local edge goes to j - 8.
+        let walk: Vec<[f64; 2]> = (0..20).map(|i| [i as f64, 0.0]).collect();
+        let s = [session(&walk)];
+        let cfg = LoopConfig { keyframe_stride: 2, ..LoopConfig::default() };
+        let c = intra_candidates(&s, 0, &cfg);
+        assert_eq!(pairs(&c), (8..20).step_by(2).map(|j| (j, j - 8)).collect::<Vec<_>>());
+        assert!(c.iter().all(|c| c.kind == LoopKind::Intra && (c.distance_m - 8.0).abs() < 1e-9));
+        // Off: a straight walk has no revisit, so no candidate at all.
+        let off = LoopConfig { local_travel_m: 0.0, ..cfg };
+        assert!(intra_candidates(&s, 0, &off).is_empty());
+    }
+
+    #[test]
+    fn a_revisit_keeps_its_candidate_beside_the_local_edge() {
+        // Out 20 m along x, 2 m over, back: the way back passes the way out.
+        let mut walk: Vec<[f64; 2]> = (0..=20).map(|i| [i as f64, 0.0]).collect();
+        walk.extend((0..=20).map(|i| [20.0 - i as f64, 2.0]));
+        let s = [session(&walk)];
+        let cfg = LoopConfig { keyframe_stride: 1, ..LoopConfig::default() };
+        let c = intra_candidates(&s, 0, &cfg);
+        // The last keyframe (back at x = 0, 42 m of travel): revisit of
+        // keyframe 0 (2 m away) and the local edge 8 m of travel back.
+        let last = walk.len() - 1;
+        let of_last: Vec<(usize, usize)> = pairs(&c).into_iter().filter(|p| p.0 == last).collect();
+        assert_eq!(of_last, vec![(last, 0), (last, last - 8)]);
+        // Local edges never reach farther than `radius_m`: around the turn
+        // the keyframe 8 m of travel back is within 8 m, so all are kept.
+        assert!(c.iter().all(|c| c.distance_m <= cfg.radius_m));
+    }
 }

@@ -297,6 +297,79 @@ pub struct SurfaceShapes {
     level: Vec<u64>,
 }
 
+/// Columns on each side over which the map's ground level is the lowest
+/// voxel (5 at 0.2 m: 1 m, wider than a pallet stack's or a car's half).
+const MAP_GROUND_REACH_COLUMNS: i32 = 5;
+
+/// The map voxels at the map's ground level: the lowest of their (x, y) key
+/// column, and within one voxel of the lowest in every column up to
+/// [`MAP_GROUND_REACH_COLUMNS`] away (so not the top of an object whose
+/// ground was never seen). Packed keys, sorted.
+fn map_ground_keys(map: &[MapPatch]) -> Vec<u64> {
+    type Columns = rustc_hash::FxHashMap<[i32; 2], i32>;
+    let mut lowest = Columns::default();
+    for p in map {
+        let k = unpack(p.key).0;
+        lowest.entry([k[0], k[1]]).and_modify(|z: &mut i32| *z = (*z).min(k[2])).or_insert(k[2]);
+    }
+    // Separable minimum over the window: along x, then along y.
+    let sweep = |from: &Columns, axis: usize| -> Columns {
+        from.keys()
+            .map(|&c| {
+                let m = (-MAP_GROUND_REACH_COLUMNS..=MAP_GROUND_REACH_COLUMNS)
+                    .filter_map(|d| {
+                        let mut n = c;
+                        n[axis] += d;
+                        from.get(&n).copied()
+                    })
+                    .min()
+                    .unwrap_or(i32::MAX);
+                (c, m)
+            })
+            .collect()
+    };
+    let around = sweep(&sweep(&lowest, 0), 1);
+    let mut keys: Vec<u64> = map
+        .iter()
+        .filter(|p| {
+            let k = unpack(p.key).0;
+            let c = [k[0], k[1]];
+            lowest.get(&c) == Some(&k[2]) && around.get(&c).is_some_and(|&m| k[2] <= m.saturating_add(1))
+        })
+        .map(|p| p.key)
+        .collect();
+    keys.sort_unstable();
+    keys
+}
+
+/// The patch a ray must cross to free a map voxel at the map's ground level
+/// (`EvidenceConfig::map_ground_crossing`): its points' plane where they
+/// make one, else the level through their centroid over the voxel's
+/// footprint. The ground clearance and the guard still apply: the crossing
+/// only takes frees away.
+fn map_ground_shape(p: &MapPatch, voxel_m: f64, cfg: &EvidenceConfig) -> VoxelShape {
+    let c = unpack(p.key).0;
+    let mean: [f64; 3] = std::array::from_fn(|a| p.xyz_m[a] - (c[a] as f64 + 0.5) * voxel_m);
+    if p.points >= 3 && p.spread_m2.iter().all(|c| c.is_finite()) {
+        let (s, _) = VoxelShape::from_spread(mean, &p.spread_m2.map(f64::from), p.points, cfg);
+        if s.normal != [0.0; 3] {
+            return VoxelShape { clearance_exempt: false, from_map: false, ..s };
+        }
+    }
+    let half = (0.5 * voxel_m) as f32;
+    VoxelShape {
+        offset_m: mean.map(|x| x as f32),
+        normal: [0.0, 0.0, 1.0],
+        e1: [1.0, 0.0, 0.0],
+        e2: [0.0, 1.0, 0.0],
+        half1_m: half,
+        half2_m: half,
+        behind_m: cfg.surface_behind_m as f32,
+        clearance_exempt: false,
+        from_map: false,
+    }
+}
+
 impl SurfaceShapes {
     /// Shapes of the voxels of `interest` (sorted packed keys) that the
     /// points of `scans` (world frame, one slice per keyframe) fall into.
@@ -353,12 +426,19 @@ impl SurfaceShapes {
             let (s, _) = VoxelShape::from_spread(mean, &cov, p.points, cfg);
             Some(VoxelShape { clearance_exempt: true, from_map: true, ..s })
         };
-        let map = if cfg.map_patches { map } else { &[] };
-        let from_map: Vec<(u64, VoxelShape)> = map
-            .par_iter()
-            .filter(|p| index.find(interest, p.key).is_some_and(|i| moments[i].n == 0))
-            .filter_map(|p| Some((p.key, map_shape(p)?)))
-            .collect();
+        let unoccupied = |p: &&MapPatch| index.find(interest, p.key).is_some_and(|i| moments[i].n == 0);
+        let from_map: Vec<(u64, VoxelShape)> = if cfg.map_patches {
+            map.par_iter().filter(unoccupied).filter_map(|p| Some((p.key, map_shape(p)?))).collect()
+        } else if cfg.map_ground_crossing {
+            let ground = map_ground_keys(map);
+            map.par_iter()
+                .filter(|p| ground.binary_search(&p.key).is_ok() && p.maybe_ground())
+                .filter(unoccupied)
+                .map(|p| (p.key, map_ground_shape(p, voxel_m, cfg)))
+                .collect()
+        } else {
+            Vec::new()
+        };
         let (mut keys, mut shapes): (Vec<u64>, Vec<VoxelShape>) = interest
             .par_iter()
             .zip(moments.par_iter())
@@ -621,22 +701,7 @@ mod tests {
         // Ground under and behind it, z = 0.02.
         let ground: Vec<[f64; 3]> =
             (0..25).map(|i| [11.82 + 0.04 * (i % 5) as f64, 0.02 + 0.04 * (i / 5) as f64, 0.02]).collect();
-        let patch = |pts: &[[f64; 3]]| {
-            let n = pts.len() as f64;
-            let mean: [f64; 3] = std::array::from_fn(|a| pts.iter().map(|p| p[a]).sum::<f64>() / n);
-            let pairs = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)];
-            let spread = std::array::from_fn(|j| {
-                let (a, b) = pairs[j];
-                (pts.iter().map(|p| (p[a] - mean[a]) * (p[b] - mean[b])).sum::<f64>() / n) as f32
-            });
-            MapPatch {
-                key: packed_key(&mean, v).unwrap(),
-                xyz_m: mean,
-                points: pts.len() as u32,
-                spread_m2: spread,
-                seen_from_m: 10.0,
-            }
-        };
+        let patch = |pts: &[[f64; 3]]| map_patch(pts, v);
         let under_ground: Vec<[f64; 3]> =
             (0..25).map(|i| [10.02 + 0.04 * (i % 5) as f64, 0.02 + 0.04 * (i / 5) as f64, 0.02]).collect();
         let map = [patch(&side), patch(&ground), patch(&under_ground)];
@@ -685,6 +750,78 @@ mod tests {
                 .get(side_key)
                 .is_none()
         );
+    }
+
+    /// An earlier session's map voxel made of `pts`.
+    fn map_patch(pts: &[[f64; 3]], v: f64) -> MapPatch {
+        let n = pts.len() as f64;
+        let mean: [f64; 3] = std::array::from_fn(|a| pts.iter().map(|p| p[a]).sum::<f64>() / n);
+        let pairs = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)];
+        let spread = std::array::from_fn(|j| {
+            let (a, b) = pairs[j];
+            (pts.iter().map(|p| (p[a] - mean[a]) * (p[b] - mean[b])).sum::<f64>() / n) as f32
+        });
+        MapPatch {
+            key: packed_key(&mean, v).unwrap(),
+            xyz_m: mean,
+            points: pts.len() as u32,
+            spread_m2: spread,
+            seen_from_m: 10.0,
+        }
+    }
+
+    /// The map's ground needs crossing: a sensor 0.6 m up (a legged robot)
+    /// casts a ray to the ground 20 m off, on a downslope 0.1 m below, and
+    /// at 15 m passes 3 cm over an earlier session's ground on a crest
+    /// (level points at z 0.04, the lowest map voxel of their column).
+    /// That voxel is above the clearance over the ray's end, so the ray
+    /// freed it; it no longer does. A ray down into a pit dug where the
+    /// crest was crosses the old ground and frees it; so does, with fewer
+    /// than three points, one crossing their level. A voxel above the
+    /// column's lowest, or more than a voxel above the lowest of the
+    /// columns up to a metre around, is not affected.
+    #[test]
+    fn grazing_rays_do_not_free_the_maps_ground_they_pass_over() {
+        use super::super::grid::InterestEvidence;
+        let on = EvidenceConfig::default();
+        assert!(on.map_ground_crossing, "the default");
+        let off = EvidenceConfig { map_ground_crossing: false, ..Default::default() };
+        let v = on.voxel_size_m;
+        let crest: Vec<[f64; 3]> =
+            (0..25).map(|i| [15.02 + 0.04 * (i % 5) as f64, 0.02 + 0.04 * (i / 5) as f64, 0.04]).collect();
+        let freed = |cfg: &EvidenceConfig, map: &[MapPatch], origin: [f64; 3], end: [f64; 3]| {
+            let mut keys: Vec<u64> = map.iter().map(|p| p.key).collect();
+            keys.extend(packed_key(&end, v));
+            keys.sort_unstable();
+            keys.dedup();
+            let scan = vec![end];
+            let shapes = SurfaceShapes::build(&keys, [scan.clone()].into_iter(), v, map, f64::NEG_INFINITY, cfg);
+            let mut ev = InterestEvidence::new(keys.clone(), v);
+            ev.add_keyframe(&origin, &scan, 3, cfg, Some(&shapes));
+            ev.get(map[0].key).unwrap().free_n
+        };
+        let map = [map_patch(&crest, v)];
+        let (robot, downslope) = ([0.0, 0.1, 0.6], [20.0, 0.1, -0.1]);
+        assert_eq!(freed(&off, &map, robot, downslope), 1, "the grazing ray freed the crest");
+        assert_eq!(freed(&on, &map, robot, downslope), 0);
+        let (above, pit) = ([15.1, 0.1, 1.8], [15.1, 0.1, -0.6]);
+        assert_eq!(freed(&on, &map, above, pit), 1, "a ray through the old ground frees it");
+        let two = [map_patch(&crest[..2], v)];
+        assert_eq!(freed(&on, &two, robot, downslope), 0);
+        assert_eq!(freed(&on, &two, above, pit), 1);
+        // With a map voxel beneath, the crest voxel is not the ground level.
+        let below: Vec<[f64; 3]> = crest.iter().map(|p| [p[0], p[1], p[2] - 0.2]).collect();
+        let stacked = [map_patch(&crest, v), map_patch(&below, v)];
+        assert_eq!(freed(&on, &stacked, robot, downslope), 1);
+        // Nor is it with the map's ground 0.4 m lower a metre off: the top
+        // of something whose ground was never seen.
+        let aside: Vec<[f64; 3]> = crest.iter().map(|p| [p[0] + 1.0, p[1], p[2] - 0.4]).collect();
+        let top = [map_patch(&crest, v), map_patch(&aside, v)];
+        assert_eq!(freed(&on, &top, robot, downslope), 1);
+        // 0.2 m lower a metre off is uneven ground: the crest is kept.
+        let slope: Vec<[f64; 3]> = crest.iter().map(|p| [p[0] + 1.0, p[1], p[2] - 0.2]).collect();
+        let uneven = [map_patch(&crest, v), map_patch(&slope, v)];
+        assert_eq!(freed(&on, &uneven, robot, downslope), 0);
     }
 
     /// The ceiling's clearance: rays rising to a slab's underside at
