@@ -224,15 +224,25 @@ fn a_session_placed_by_initial_guess_is_rebuilt_from_its_recorded_placement() {
     assert!(r["sessions"][0]["initial_guess"].is_null(), "{r}");
     let info = json_of(&["info", s(&b)]);
     assert_eq!(info["alignment"][1]["method"], "initial_guess", "{info}");
-    // The recorded placement is ICP's fixed point: the rebuilt poses are
-    // within millimetres of the source's.
+    // The recorded placement is ICP's fixed point: across the synthetic
+    // corridor (y, z) the rebuilt poses are within millimetres of the
+    // source's. Along it (x) only the walls' finite ends and the odometry
+    // hold the poses, and where the loops' GICP stops differs by centimetres
+    // (5 cm measured with local loop edges); a placement that ignored the
+    // recorded guess would be off by metres and radians.
     let (pa, pb) = (json_of(&["poses", s(&a)]), json_of(&["poses", s(&b)]));
     let (pa, pb) = (pa.as_array().unwrap(), pb.as_array().unwrap());
     assert_eq!(pa.len(), pb.len());
+    let diff =
+        |p: &serde_json::Value, q: &serde_json::Value, k: &str| (p[k].as_f64().unwrap() - q[k].as_f64().unwrap()).abs();
     for (p, q) in pa.iter().zip(pb) {
-        let d: f64 =
-            ["x_m", "y_m", "z_m"].iter().map(|k| (p[k].as_f64().unwrap() - q[k].as_f64().unwrap()).powi(2)).sum();
-        assert!(d.sqrt() < 0.05, "keyframe {} of session {} moved {:.3} m", p["keyframe"], p["session"], d.sqrt());
+        let (kf, sn) = (&p["keyframe"], &p["session"]);
+        let across = diff(p, q, "y_m").hypot(diff(p, q, "z_m"));
+        assert!(across < 0.005, "keyframe {kf} of session {sn} moved {across:.4} m across the corridor");
+        assert!(diff(p, q, "x_m") < 0.10, "keyframe {kf} of session {sn} moved {:.3} m along it", diff(p, q, "x_m"));
+        let dot: f64 = ["qx", "qy", "qz", "qw"].iter().map(|k| p[k].as_f64().unwrap() * q[k].as_f64().unwrap()).sum();
+        let turn_deg = 2.0 * dot.abs().min(1.0).acos().to_degrees();
+        assert!(turn_deg < 0.2, "keyframe {kf} of session {sn} turned {turn_deg:.3} deg");
     }
 }
 
