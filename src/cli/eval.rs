@@ -314,6 +314,29 @@ fn print_changes(r: &ChangesReport) {
         .map(|c| format!("{} {} of {}", c.class, thousands(c.static_voxels), thousands(c.voxels)))
         .collect();
     println!("removed-object voxels left static by class (most): {}", left.join(", "));
+    let objects: Vec<String> = s
+        .removed_by_object
+        .iter()
+        .filter(|o| o.static_voxels > 0)
+        .take(8)
+        .map(|o| {
+            format!(
+                "{} {} (last in s{}) {} of {} [{}]",
+                o.class,
+                o.object,
+                o.last_present,
+                thousands(o.static_voxels),
+                thousands(o.voxels),
+                o.categories
+                    .iter()
+                    .filter(|c| c.static_voxels > 0)
+                    .map(|c| format!("{} {}", c.category, thousands(c.static_voxels)))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )
+        })
+        .collect();
+    println!("removed objects with the most voxels left static: {}", objects.join("; "));
     let unseen = s.appeared.iter().filter(|a| !a.seen).count();
     println!(
         "{} removed, {} appeared objects ({unseen} not seen in the map); {} object changes unscored (fewer than {} \

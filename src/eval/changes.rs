@@ -254,6 +254,19 @@ pub struct ObjectChange {
     pub nearest_keyframe_m: Option<f64>,
 }
 
+/// One removed object's voxels (metric 2).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct RemovedObject {
+    pub object: u32,
+    pub class: String,
+    /// The last session of the map it was present in (simulator number).
+    pub last_present: usize,
+    pub voxels: u64,
+    pub static_voxels: u64,
+    /// Its voxels by category after the last session.
+    pub categories: Vec<CategoryCount>,
+}
+
 /// One appeared object (metric 3).
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct AppearedObject {
@@ -292,6 +305,8 @@ pub struct ChangeScores {
     pub removed_by_class: Vec<ClassCount>,
     /// 2: removed objects' voxels by category.
     pub removed_by_category: Vec<CategoryCount>,
+    /// 2: each removed object's voxels, most left static first.
+    pub removed_by_object: Vec<RemovedObject>,
     pub removed_objects: usize,
     /// 3: present / seen appeared objects.
     pub appeared_present: Fraction,
@@ -473,8 +488,9 @@ struct Acc {
     mover: [u64; 2],
     /// Per object: [voxels, static] of its region against `first`.
     appeared_by_object: FxHashMap<u32, [u64; 2]>,
-    /// Per removed object (the lowest index a voxel is of): [voxels, static].
-    removed_by_object: FxHashMap<u32, [u64; 2]>,
+    /// Per removed object (the lowest index a voxel is of): [voxels, static]
+    /// by category after the last session.
+    removed_by_object: FxHashMap<u32, [[u64; 2]; 6]>,
     /// Per case: region voxels that decide whether it is scored.
     case_voxels: Vec<u64>,
 }
@@ -507,13 +523,16 @@ impl Acc {
             e[0] += v[0];
             e[1] += v[1];
         }
-        for (mine, theirs) in
-            [(&mut self.appeared_by_object, o.appeared_by_object), (&mut self.removed_by_object, o.removed_by_object)]
-        {
-            for (k, v) in theirs {
-                let e = mine.entry(k).or_default();
-                e[0] += v[0];
-                e[1] += v[1];
+        for (k, v) in o.appeared_by_object {
+            let e = self.appeared_by_object.entry(k).or_default();
+            e[0] += v[0];
+            e[1] += v[1];
+        }
+        for (k, v) in o.removed_by_object {
+            let e = self.removed_by_object.entry(k).or_default();
+            for (a, b) in e.iter_mut().zip(v) {
+                a[0] += b[0];
+                a[1] += b[1];
             }
         }
         if self.case_voxels.len() < o.case_voxels.len() {
@@ -603,7 +622,7 @@ pub fn score(
                 {
                     acc.removed[0] += 1;
                     acc.removed[1] += s;
-                    let e = acc.removed_by_object.entry(o).or_default();
+                    let e = &mut acc.removed_by_object.entry(o).or_default()[category_index(v.category)];
                     e[0] += 1;
                     e[1] += s;
                     let c = &mut acc.removed_categories[category_index(v.category)];
@@ -738,11 +757,23 @@ pub fn score(
     }
     let permanent_by_class = class_counts(classes);
     let mut classes: BTreeMap<&str, [u64; 2]> = BTreeMap::new();
-    for (&o, n) in &acc.removed_by_object {
-        let e = classes.entry(objects[o as usize].class.as_str()).or_default();
+    let mut removed_by_object: Vec<RemovedObject> = Vec::with_capacity(acc.removed_by_object.len());
+    for (&o, counts) in &acc.removed_by_object {
+        let n = counts.iter().fold([0, 0], |t, c| [t[0] + c[0], t[1] + c[1]]);
+        let object = &objects[o as usize];
+        let e = classes.entry(object.class.as_str()).or_default();
         e[0] += n[0];
         e[1] += n[1];
+        removed_by_object.push(RemovedObject {
+            object: object.id,
+            class: object.class.clone(),
+            last_present: sessions.iter().copied().filter(|&s| object.present_in(s)).max().unwrap_or(0),
+            voxels: n[0],
+            static_voxels: n[1],
+            categories: by_category(counts),
+        });
     }
+    removed_by_object.sort_by(|a, b| b.static_voxels.cmp(&a.static_voxels).then_with(|| a.object.cmp(&b.object)));
     let mut removed_by_class = class_counts(classes);
     removed_by_class.sort_by(|a, b| b.static_voxels.cmp(&a.static_voxels).then_with(|| a.class.cmp(&b.class)));
     ChangeScores {
@@ -761,6 +792,7 @@ pub fn score(
         permanent_by_class,
         removed_by_class,
         removed_by_category: by_category(&acc.removed_categories),
+        removed_by_object,
         removed_objects: removed_final.iter().filter(|&&r| r).count(),
         appeared_present: Fraction::new(appeared.iter().filter(|a| a.present).count() as u64, seen),
         appeared_static_voxels: Fraction::new(acc.appeared[1], acc.appeared[0]),
@@ -1186,6 +1218,9 @@ mod tests {
         assert_eq!((c.len(), c[0].category.as_str(), c[0].voxels, c[0].static_voxels), (1, "coexist", gone, 1));
         let k = &s.removed_by_class;
         assert_eq!((k.len(), k[0].class.as_str(), k[0].voxels, k[0].static_voxels), (1, "container", gone, 1));
+        let o = &s.removed_by_object;
+        assert_eq!((o.len(), o[0].object, o[0].last_present, o[0].voxels, o[0].static_voxels), (1, 1, 1, gone, 1));
+        assert_eq!(o[0].categories, *c);
     }
 
     /// An appeared object is present with half its voxels static and seen

@@ -67,6 +67,17 @@ impl AnchorMode {
 /// LT-SLAM's values the optimum (reached from the truth too) left 130-230 mm
 /// ATE; with odometry 0.05 m / 0.005 rad and loops 0.02 m / 0.001 rad
 /// (still 5× the measured loop error) it left 75-100 mm.
+///
+/// Tried and not taken: spreading a loop's σ over directions by the shape
+/// of its GICP Hessian (each block's best direction at σ, the others
+/// weaker in proportion; MATH.md §5 allows "or the GICP Hessian"). On the
+/// simulated 60-keyframe sessions of `bench/dor_vs_dufomap.py` ATE RMSE went
+/// from 12-14 to 14-18 mm (Avia 28 mm) and DOR F1 moved by −1.08 (Avia) to
+/// +0.27; on the synthetic corridor of `tests/rebuild.rs` the position along
+/// the corridor, which no loop held any more, differed by 17 cm between a
+/// store and its rebuild (5 cm with these σ). GICP's Hessian counts its
+/// points as independent, so its weak directions need a floor before they
+/// can weigh an edge.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct GraphConfig {

@@ -18,6 +18,8 @@
 //!   fails at once with "store in use by pid N".
 //! - **Readers never block** and never see a half step: [`Store::open_read_only`]
 //!   uses a read-only connection, and SQLite's WAL gives it a consistent snapshot.
+//!   (Once, on a store an older seam wrote, it applies the pending
+//!   migrations first, as a writer.)
 //!
 //! Not here: what the rows mean (the pipeline decides that), printing (cli).
 
@@ -183,10 +185,20 @@ impl Store {
 
     /// Opens an existing store for reading. Never blocks on a writer and
     /// never writes.
+    ///
+    /// A store written by an older seam is upgraded first, the one time a
+    /// reader writes: its pending migrations (each one transaction, columns
+    /// and tables added, nothing rewritten) under the writer lock. A reader
+    /// of the old schema would otherwise fail on the first column it lacks.
     pub fn open_read_only(root: &Path) -> Result<Store, StoreError> {
         check_is_store(root)?;
         let conn = open_conn(root, true)?;
         schema::check_version(&conn, root)?;
+        if schema::user_version(&conn, root)? < schema::SCHEMA_VERSION {
+            drop(conn);
+            drop(Store::open(root)?);
+            return Store::open_read_only(root);
+        }
         Ok(Store { root: root.to_path_buf(), conn, _lock: None })
     }
 
@@ -374,6 +386,23 @@ mod tests {
         // Readers are fine while the writer holds the lock.
         let r = Store::open_read_only(&root).unwrap();
         assert_eq!(r.meta().unwrap().voxel_size_m, 0.2);
+    }
+
+    /// A reader of a store an older seam wrote upgrades it once: here a
+    /// schema-5 store (before lifelong voxels had `spread_m2`), which a
+    /// reader of the lifelong map would otherwise fail on.
+    #[test]
+    fn reader_upgrades_an_older_store() {
+        let dir = tempfile::tempdir().unwrap();
+        let root = dir.path().join("s.seam");
+        drop(Store::create(&root, &opts()).unwrap());
+        {
+            let conn = rusqlite::Connection::open(root.join(DB_FILE)).unwrap();
+            conn.execute_batch("ALTER TABLE map_voxels DROP COLUMN spread_m2; PRAGMA user_version = 5;").unwrap();
+        }
+        let r = Store::open_read_only(&root).unwrap();
+        assert_eq!(schema::user_version(r.conn(), &root).unwrap(), schema::SCHEMA_VERSION);
+        assert!(map_voxels_in(r.conn(), &WorldBox::ALL, None).unwrap().is_empty());
     }
 
     #[test]
