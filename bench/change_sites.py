@@ -16,9 +16,12 @@ STORE --gt SIM`. Several `--config` files are compared on the same
 simulation, so a before/after is one run.
 
 Columns: permanent structure static (goal >= 98 %), removed-object voxels
-left static (<= 5 %), the same among voxels some session saw free, appeared
-objects present (>= 90 %), mover voxels as a share of the static map
-(<= 1 %), object changes with events in the right session; the largest
+left static (<= 5 %), the same among voxels some session saw free and among
+voxels some session after the object's removal had within its sensor's
+range and field of view (occlusion not modelled), appeared objects present
+(>= 90 %), mover voxels as a share of the static map (<= 1 %), object
+changes with events in the right session, and how many of the wrong ones
+had none of their voxels in view in that session ("unseen"); the largest
 per-session ATE RMSE of the store's poses (`seam eval align`); the ingest
 wall time of all sessions.
 With `--out`, simulations are kept and reused when their folder exists.
@@ -72,6 +75,10 @@ def run_site(seam, work, sensor, args, configs):
             "permanent_static": score(sc, "permanent_static"),
             "removed_static": score(sc, "removed_static"),
             "removed_static_seen_free": score(sc, "removed_static_seen_free"),
+            "removed_static_in_view": score(sc, "removed_static_in_view"),
+            "events_wrong_out_of_view": sum(1 for c in sc.get("changes", [])
+                                            if c.get("scored") and not c.get("correct")
+                                            and c.get("in_view_voxels") == 0),
             "appeared_present": score(sc, "appeared_present"),
             "mover_static_of_static_map": score(sc, "mover_static_of_static_map"),
             "events_correct": score(sc, "events_correct"),
@@ -119,15 +126,17 @@ def main():
         if not args.out:
             shutil.rmtree(work, ignore_errors=True)
 
-    head = f"{'sensor':<9} {'config':<16} {'perm%':>7} {'removed%':>9} {'seenfree%':>9} " \
-           f"{'appeared%':>9} {'movers%':>8} {'events%':>8} {'ATE mm':>7} {'ingest s':>9}"
+    head = f"{'sensor':<9} {'config':<16} {'perm%':>7} {'removed%':>9} {'seenfree%':>9} {'inview%':>8} " \
+           f"{'appeared%':>9} {'movers%':>8} {'events%':>8} {'unseen':>6} {'ATE mm':>7} {'ingest s':>9}"
     print(head)
     print("-" * len(head))
     for r in rows:
         ate = "n/a" if r["ate_max_session_m"] is None else f"{1000 * r['ate_max_session_m']:.0f}"
         print(f"{r['sensor']:<9} {r['config']:<16} {pct(r['permanent_static']):>7} {pct(r['removed_static']):>9} "
-              f"{pct(r['removed_static_seen_free']):>9} {pct(r['appeared_present']):>9} "
-              f"{pct(r['mover_static_of_static_map']):>8} {pct(r['events_correct']):>8} {ate:>7} "
+              f"{pct(r['removed_static_seen_free']):>9} {pct(r['removed_static_in_view']):>8} "
+              f"{pct(r['appeared_present']):>9} "
+              f"{pct(r['mover_static_of_static_map']):>8} {pct(r['events_correct']):>8} "
+              f"{r['events_wrong_out_of_view']:>6} {ate:>7} "
               f"{r['ingest_s']:>9.1f}")
     print(f"\n{args.sessions} sessions x {args.keyframes} keyframes per site; goals: perm >= 98, removed <= 5, "
           f"appeared >= 90, movers <= 1 (% of the static map). {time.perf_counter() - t0:.0f} s in all.")

@@ -90,6 +90,15 @@ fn sessions_are_aligned_jointly_within_a_decimetre() {
     let (left, _) = goal("removed-object voxels left in the static map");
     eprintln!("removed-object voxels left static: {left:.4}");
     assert!(left < 0.06, "removed objects stay in the static map: {left:.3}");
+    // What a later session's sensor had in view (site.toml names the
+    // OS1-64) is part of what was removed, and each change's in-view
+    // voxels part of its region.
+    let s = &report["scores"];
+    let total = |k: &str| s[k]["total"].as_u64().unwrap();
+    assert!(total("removed_static_in_view") > 0 && total("removed_static_in_view") <= total("removed_static"), "{s}");
+    for c in s["changes"].as_array().unwrap() {
+        assert!(c["in_view_voxels"].as_u64().unwrap() <= c["voxels"].as_u64().unwrap(), "{c}");
+    }
 }
 
 /// A session that shares nothing with the store is kept, unaligned, with the

@@ -286,8 +286,13 @@ fn print_changes(r: &ChangesReport) {
     rows.insert(1, extra("on permanent objects", &s.permanent_static_objects));
     rows.insert(2, extra("ground and the rest", &s.permanent_static_ground));
     rows.insert(4, extra("of the voxels some session saw free", &s.removed_static_seen_free));
-    rows.insert(6, extra("appeared objects' voxels static", &s.appeared_static_voxels));
-    rows.insert(8, extra("mover voxels static (of mover voxels)", &s.mover_voxels_static));
+    let mut at = 5;
+    if let Some(f) = &s.removed_static_in_view {
+        rows.insert(at, extra("of the voxels a later session had in view", f));
+        at += 1;
+    }
+    rows.insert(at + 1, extra("appeared objects' voxels static", &s.appeared_static_voxels));
+    rows.insert(at + 3, extra("mover voxels static (of mover voxels)", &s.mover_voxels_static));
     rows.push(extra("removed objects", &s.events_removed_correct));
     rows.push(extra("appeared objects", &s.events_appeared_correct));
     print_table(&["metric", "value", "count", "goal", "met"], &rows);
@@ -359,6 +364,7 @@ fn print_changes(r: &ChangesReport) {
                 c.class.clone(),
                 c.change.into(),
                 c.voxels.to_string(),
+                c.in_view_voxels.map_or("-".into(), |n| n.to_string()),
                 c.nearest_keyframe_m.map_or("-".into(), |m| format!("{m:.1}")),
                 if events.is_empty() { "none".into() } else { events.join(" ") },
             ]
@@ -368,7 +374,7 @@ fn print_changes(r: &ChangesReport) {
         println!();
         println!("object changes without the right events in their session:");
         print_table(
-            &["session", "object", "class", "change", "voxels", "nearest_kf_m", "events in its region"],
+            &["session", "object", "class", "change", "voxels", "in_view", "nearest_kf_m", "events in its region"],
             &wrong,
         );
     }

@@ -54,8 +54,13 @@
 //!    that belong to a static object absent in `last` (present earlier) and
 //!    are near no object present in `last`, the fraction in the static map.
 //!    Also: the same among the voxels some session saw free (a
-//!    `deleted_overlap` event), which leaves out what no session revisited,
-//!    and the voxels by category.
+//!    `deleted_overlap` event), which leaves out what no session revisited;
+//!    among the voxels some session after the object's last had *in view*
+//!    (within its sensor's range and field of view from one of its true
+//!    keyframe poses, [`SensorView`]; occlusion is not modelled, so this
+//!    leaves out only what no sensor could have seen: a crane jib above a
+//!    spinning sensor's band, the space behind a forward one); and the
+//!    voxels by category and by object.
 //! 3. **Presence of appeared objects** (goal ≥ 90 %): static objects absent in
 //!    `first` and present in `last`. An object's voxels are its region
 //!    against `first`; it is *seen* with at least `min_voxels` (10) of them
@@ -80,12 +85,16 @@
 //!    voxels first seen before `b`, an appeared one with at least
 //!    `min_voxels` region voxels first seen in `b`; the others are counted
 //!    as unscored. Each change lists the events in its region by session and
-//!    category, and how far its session's route passed.
+//!    category, how far its session's route passed, and how many of its
+//!    region voxels that session's sensor had in view (none: no method could
+//!    have placed the change there; the first session that saw the space
+//!    records it).
 
 use super::EvalError;
 use super::align::{rmse_after, umeyama};
 use crate::change::{Category, SessionChanges};
 use crate::geometry::Pose;
+use crate::sensor::Fov;
 use crate::sim::{GroundTruth, Shape, read_ground_truth};
 use crate::store::{self, SessionId, SessionRow, Store, WorldBox};
 use nalgebra::{Point3, Vector3};
@@ -197,6 +206,58 @@ impl Fraction {
     }
 }
 
+/// What a session's sensor had in view: a point within the model's range
+/// and field of view from one of the session's true keyframe poses (a
+/// spinning sensor's elevation band; the ellipse a forward sensor's rosette
+/// fills, inscribed in its rectangle). Occlusion is not modelled, so "in
+/// view" is an upper bound of what the sensor saw: it separates what no
+/// session could have seen (a crane jib above a spinning sensor's band,
+/// the space behind a forward sensor) from what seam missed.
+#[derive(Debug, Clone)]
+pub struct SensorView {
+    fov: Fov,
+    min_range_m: f64,
+    max_range_m: f64,
+    /// Per simulator session, world → LiDAR of every keyframe.
+    lidar_from_world: HashMap<usize, Vec<Pose>>,
+}
+
+impl SensorView {
+    /// `poses`: per simulator session, its true `t_world_lidar` per keyframe.
+    pub fn new(
+        fov: Fov,
+        min_range_m: f64,
+        max_range_m: f64,
+        poses: impl IntoIterator<Item = (usize, Vec<Pose>)>,
+    ) -> SensorView {
+        let lidar_from_world = poses.into_iter().map(|(s, p)| (s, p.iter().map(|t| t.inverse()).collect())).collect();
+        SensorView { fov, min_range_m, max_range_m, lidar_from_world }
+    }
+
+    /// Whether some keyframe of `session` had `p` (world) in view.
+    pub fn sees(&self, session: usize, p: [f64; 3]) -> bool {
+        let Some(poses) = self.lidar_from_world.get(&session) else { return false };
+        let p = Point3::from(p);
+        poses.iter().any(|t| self.in_fov(&(t * p).coords))
+    }
+
+    fn in_fov(&self, q: &Vector3<f64>) -> bool {
+        let r = q.norm();
+        if !(self.min_range_m..=self.max_range_m).contains(&r) {
+            return false;
+        }
+        let elevation_deg = q.z.atan2(q.x.hypot(q.y)).to_degrees();
+        match self.fov {
+            Fov::Band { elev_min_deg, elev_max_deg } => (elev_min_deg..=elev_max_deg).contains(&elevation_deg),
+            Fov::Rect { azimuth_deg, elevation_deg: height_deg } => {
+                let azimuth = q.y.atan2(q.x).to_degrees() / (azimuth_deg / 2.0);
+                let elevation = elevation_deg / (height_deg / 2.0);
+                azimuth * azimuth + elevation * elevation <= 1.0
+            }
+        }
+    }
+}
+
 /// Events of one session and category in an object's region.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct EventCount {
@@ -252,6 +313,9 @@ pub struct ObjectChange {
     /// Horizontal distance from the object's box centre to the nearest true
     /// keyframe position of `session`, m (filled by [`changes_report`]).
     pub nearest_keyframe_m: Option<f64>,
+    /// Of `voxels`, those `session`'s sensor had in view ([`SensorView`];
+    /// `None` without one).
+    pub in_view_voxels: Option<u64>,
 }
 
 /// One removed object's voxels (metric 2).
@@ -301,6 +365,10 @@ pub struct ChangeScores {
     /// 2, among the voxels some session saw free (`deleted_overlap`): what
     /// remains when the sessions' coverage is left out.
     pub removed_static_seen_free: Fraction,
+    /// 2, among the voxels some session after the object's last had in view
+    /// ([`SensorView`]; `None` without one): what remains when what no
+    /// sensor could see is left out.
+    pub removed_static_in_view: Option<Fraction>,
     /// 2: removed objects' voxels by class, most left static first.
     pub removed_by_class: Vec<ClassCount>,
     /// 2: removed objects' voxels by category.
@@ -480,6 +548,7 @@ struct Acc {
     permanent_objects: [u64; 2],
     removed: [u64; 2],
     removed_seen_free: [u64; 2],
+    removed_in_view: [u64; 2],
     permanent_categories: [[u64; 2]; 6],
     /// By object index (`u32::MAX`: ground and the rest).
     permanent_objects_by_object: FxHashMap<u32, [u64; 2]>,
@@ -493,6 +562,8 @@ struct Acc {
     removed_by_object: FxHashMap<u32, [[u64; 2]; 6]>,
     /// Per case: region voxels that decide whether it is scored.
     case_voxels: Vec<u64>,
+    /// Per case: of those, the ones its session's sensor had in view.
+    case_in_view: Vec<u64>,
 }
 
 impl Acc {
@@ -504,6 +575,7 @@ impl Acc {
             (&mut self.permanent_objects, o.permanent_objects),
             (&mut self.removed, o.removed),
             (&mut self.removed_seen_free, o.removed_seen_free),
+            (&mut self.removed_in_view, o.removed_in_view),
             (&mut self.appeared, o.appeared),
             (&mut self.mover, o.mover),
         ] {
@@ -535,11 +607,13 @@ impl Acc {
                 a[1] += b[1];
             }
         }
-        if self.case_voxels.len() < o.case_voxels.len() {
-            self.case_voxels.resize(o.case_voxels.len(), 0);
-        }
-        for (a, b) in self.case_voxels.iter_mut().zip(o.case_voxels) {
-            *a += b;
+        for (mine, theirs) in [(&mut self.case_voxels, o.case_voxels), (&mut self.case_in_view, o.case_in_view)] {
+            if mine.len() < theirs.len() {
+                mine.resize(theirs.len(), 0);
+            }
+            for (a, b) in mine.iter_mut().zip(theirs) {
+                *a += b;
+            }
         }
         self
     }
@@ -562,6 +636,7 @@ pub fn score(
     movers: &[MoverBox],
     voxels: &[EvalVoxel],
     events: &[EvalEvent],
+    view: Option<&SensorView>,
     cfg: &ChangeEvalConfig,
 ) -> ChangeScores {
     let (Some(&first), Some(&last)) = (sessions.first(), sessions.last()) else {
@@ -576,6 +651,15 @@ pub fn score(
     let appeared_final: Vec<bool> = (0..objects.len())
         .map(|i| scene.relevant[i] && !objects[i].present_in(first) && objects[i].present_in(last))
         .collect();
+    // Per object, the sessions of the map after the last one it was present in.
+    let after_last: Vec<&[usize]> = objects
+        .iter()
+        .map(|o| {
+            let k = sessions.iter().rposition(|&s| o.present_in(s)).map_or(0, |k| k + 1);
+            &sessions[k..]
+        })
+        .collect();
+    let seen_later = |o: u32, p: [f64; 3]| view.map(|v| after_last[o as usize].iter().any(|&s| v.sees(s, p)));
     let mut cases: Vec<Case> = Vec::new();
     for (at, w) in sessions.windows(2).enumerate() {
         let (a, b) = (w[0], w[1]);
@@ -596,7 +680,7 @@ pub fn score(
     let acc = voxels
         .par_iter()
         .fold(
-            || Acc { case_voxels: vec![0; cases.len()], ..Acc::default() },
+            || Acc { case_voxels: vec![0; cases.len()], case_in_view: vec![0; cases.len()], ..Acc::default() },
             |mut acc, v| {
                 let s = u64::from(v.is_static);
                 acc.total += 1;
@@ -632,6 +716,10 @@ pub fn score(
                         acc.removed_seen_free[0] += 1;
                         acc.removed_seen_free[1] += s;
                     }
+                    if seen_later(o, v.xyz) == Some(true) {
+                        acc.removed_in_view[0] += 1;
+                        acc.removed_in_view[1] += s;
+                    }
                 }
                 if l.of.iter().any(|&o| appeared_final[o as usize]) && scene.free_of_present(&l, first) {
                     acc.appeared[0] += 1;
@@ -656,13 +744,19 @@ pub fn score(
                         };
                         if seen && scene.free_of_present(&l, case.reference) {
                             acc.case_voxels[c] += 1;
+                            if view.is_some_and(|w| w.sees(case.session, v.xyz)) {
+                                acc.case_in_view[c] += 1;
+                            }
                         }
                     }
                 }
                 acc
             },
         )
-        .reduce(|| Acc { case_voxels: vec![0; cases.len()], ..Acc::default() }, Acc::merge);
+        .reduce(
+            || Acc { case_voxels: vec![0; cases.len()], case_in_view: vec![0; cases.len()], ..Acc::default() },
+            Acc::merge,
+        );
 
     // Events in each case's region, by (session, category).
     let case_events: Vec<BTreeMap<(usize, Category), u64>> = events
@@ -696,8 +790,8 @@ pub fn score(
     let changes: Vec<ObjectChange> = cases
         .iter()
         .zip(&case_events)
-        .zip(&acc.case_voxels)
-        .map(|((case, ev), &voxels)| {
+        .zip(acc.case_voxels.iter().zip(&acc.case_in_view))
+        .map(|((case, ev), (&voxels, &in_view))| {
             let o = &objects[case.object as usize];
             let scored = voxels as usize >= cfg.min_voxels;
             let right = |c: Category| {
@@ -723,6 +817,7 @@ pub fn score(
                     .map(|(&(session, c), &count)| EventCount { session, category: c.as_str().into(), count })
                     .collect(),
                 nearest_keyframe_m: None,
+                in_view_voxels: view.is_some().then_some(in_view),
             }
         })
         .collect();
@@ -788,6 +883,7 @@ pub fn score(
         ),
         removed_static: Fraction::new(acc.removed[1], acc.removed[0]),
         removed_static_seen_free: Fraction::new(acc.removed_seen_free[1], acc.removed_seen_free[0]),
+        removed_static_in_view: view.is_some().then(|| Fraction::new(acc.removed_in_view[1], acc.removed_in_view[0])),
         permanent_by_category: by_category(&acc.permanent_categories),
         permanent_by_class,
         removed_by_class,
@@ -1080,7 +1176,16 @@ pub fn changes_report(store: &Store, gt_dir: &Path, cfg: &ChangeEvalConfig) -> R
         .filter(|g| order.contains(&g.number))
         .flat_map(|g| g.movers.iter().flatten().map(|(_, shape)| MoverBox { session: g.number, shape: *shape }))
         .collect();
-    let mut scores = score(&order, &objects, &movers, &voxels, &events, cfg);
+    let view = truth.sensor.map(|model| {
+        let spec = crate::sim::sensor_spec(model);
+        SensorView::new(
+            model.fov(),
+            spec.min_range_m,
+            spec.max_range_m,
+            truth.sessions.iter().filter(|g| order.contains(&g.number)).map(|g| (g.number, g.poses.clone())),
+        )
+    });
+    let mut scores = score(&order, &objects, &movers, &voxels, &events, view.as_ref(), cfg);
     for c in &mut scores.changes {
         let (Some(o), Some(g)) = (truth.object(crate::sim::ObjectId(c.object)), truth.session(c.session)) else {
             continue;
@@ -1155,7 +1260,7 @@ mod tests {
         // the one beside it is permanent ground-level structure.
         let objects = vec![object(1, &[1], vec![b])];
         let voxels = vec![voxel(along, true, 1), voxel(off_axis, true, 1)];
-        let s = score(&[1, 2], &objects, &[], &voxels, &[], &cfg());
+        let s = score(&[1, 2], &objects, &[], &voxels, &[], None, &cfg());
         assert_eq!(s.removed_static, Fraction::new(1, 1));
         assert_eq!(s.permanent_static, Fraction::new(1, 1));
         // Far from the grid's origin cell and across cell borders too.
@@ -1180,7 +1285,7 @@ mod tests {
         voxels.extend(fill([-1.0, -0.8, -0.2], [1.0, 0.8, 0.0], true, 1)); // ground under it
         let ground_n = 10 * 8;
         voxels.push(voxel([0.0, 5.0, 2.9], false, 1)); // a wall voxel out of the static map
-        let s = score(&[1, 2, 3], &objects, &[], &voxels, &[], &cfg());
+        let s = score(&[1, 2, 3], &objects, &[], &voxels, &[], None, &cfg());
         assert_eq!(s.permanent_static, Fraction::new(wall_n + ground_n, wall_n + ground_n + 1));
         assert_eq!(s.permanent_static_objects, Fraction::new(wall_n, wall_n + 1));
         assert_eq!(s.permanent_static_ground, Fraction::new(ground_n, ground_n));
@@ -1210,7 +1315,7 @@ mod tests {
         for v in &mut voxels[1..4] {
             v.seen_free = true;
         }
-        let s = score(&[1, 2], &objects, &[], &voxels, &[], &cfg());
+        let s = score(&[1, 2], &objects, &[], &voxels, &[], None, &cfg());
         assert_eq!(s.removed_objects, 1);
         assert_eq!(s.removed_static, Fraction::new(1, gone));
         assert_eq!(s.removed_static_seen_free, Fraction::new(0, 3));
@@ -1221,6 +1326,67 @@ mod tests {
         let o = &s.removed_by_object;
         assert_eq!((o.len(), o[0].object, o[0].last_present, o[0].voxels, o[0].static_voxels), (1, 1, 1, gone, 1));
         assert_eq!(o[0].categories, *c);
+    }
+
+    /// A spinning sensor sees its elevation band within range; a forward
+    /// one the ellipse inside its rectangle, ahead only.
+    #[test]
+    fn sensor_view_is_the_band_or_the_ellipse_within_range() {
+        let at_origin = || [(1, vec![Pose::identity()])];
+        let band = SensorView::new(Fov::Band { elev_min_deg: -22.5, elev_max_deg: 22.5 }, 0.5, 120.0, at_origin());
+        assert!(band.sees(1, [-10.0, 0.0, 1.0])); // behind is fine for a 360° sensor
+        assert!(!band.sees(1, [10.0, 0.0, 5.0])); // 26.6° up
+        assert!(!band.sees(1, [130.0, 0.0, 0.0])); // beyond its range
+        assert!(!band.sees(1, [0.2, 0.0, 0.0])); // blanked
+        assert!(!band.sees(2, [10.0, 0.0, 0.0])); // no such session
+        let ahead = SensorView::new(Fov::Rect { azimuth_deg: 70.4, elevation_deg: 77.2 }, 1.0, 190.0, at_origin());
+        assert!(ahead.sees(1, [10.0, 0.0, 0.0]));
+        assert!(!ahead.sees(1, [-10.0, 0.0, 0.0]));
+        let corner = [10.0, 30f64.to_radians().tan() * 10.0, 0.0];
+        assert!(ahead.sees(1, corner)); // 30° left, level
+        // 30° left and 30° up: inside the rectangle, outside the ellipse.
+        let up = 30f64.to_radians().tan() * corner[0].hypot(corner[1]);
+        assert!(!ahead.sees(1, [corner[0], corner[1], up]));
+        // A keyframe turned around sees behind the first.
+        let turned = Pose::from_parts(
+            nalgebra::Translation3::new(0.0, 0.0, 0.0),
+            nalgebra::UnitQuaternion::from_euler_angles(0.0, 0.0, std::f64::consts::PI),
+        );
+        let both = SensorView::new(
+            Fov::Rect { azimuth_deg: 70.4, elevation_deg: 77.2 },
+            1.0,
+            190.0,
+            [(1, vec![Pose::identity(), turned])],
+        );
+        assert!(both.sees(1, [-10.0, 0.0, 0.0]));
+    }
+
+    /// Removed-object leftovers among what a later session had in view, and
+    /// each change's voxels its session had in view.
+    #[test]
+    fn in_view_leftovers_count_only_what_a_later_session_could_see() {
+        let crate_box = Shape::cuboid([20.0, 0.0, 0.8], [2.0, 2.0, 1.6], 0.0);
+        let objects = vec![object(1, &[1], vec![crate_box])];
+        let voxels = fill([19.2, -0.8, 0.4], [20.8, 0.8, 1.4], true, 1);
+        // Session 2 looks down the +x axis from x = 0 (the crate is ahead)
+        // with a band that ends at 2° up: the crate's top layers, about
+        // 0.7 m above the sensor's height and more, are out of view.
+        let view = SensorView::new(
+            Fov::Band { elev_min_deg: -20.0, elev_max_deg: 2.0 },
+            0.5,
+            100.0,
+            [(1, vec![Pose::identity()]), (2, vec![Pose::identity()])],
+        );
+        let s = score(&[1, 2], &objects, &[], &voxels, &[], Some(&view), &cfg());
+        let elevation_deg = |p: [f64; 3]| p[2].atan2(p[0].hypot(p[1])).to_degrees();
+        let low = voxels.iter().filter(|v| elevation_deg(v.xyz) <= 2.0).count() as u64;
+        assert!(low > 0 && low < voxels.len() as u64);
+        assert_eq!(s.removed_static, Fraction::new(voxels.len() as u64, voxels.len() as u64));
+        assert_eq!(s.removed_static_in_view, Some(Fraction::new(low, low)));
+        let change = &s.changes[0];
+        assert_eq!((change.change, change.voxels, change.in_view_voxels), ("removed", voxels.len() as u64, Some(low)));
+        let without = score(&[1, 2], &objects, &[], &voxels, &[], None, &cfg());
+        assert_eq!((without.removed_static_in_view, without.changes[0].in_view_voxels), (None, None));
     }
 
     /// An appeared object is present with half its voxels static and seen
@@ -1237,7 +1403,7 @@ mod tests {
             voxels.push(voxel([10.0 + x, 0.0, 1.0], i < 1, 3)); // 1 of 4: absent
         }
         voxels.push(voxel([20.0, 0.0, 1.0], true, 3)); // 1 voxel: unseen
-        let s = score(&[1, 2, 3], &objects, &[], &voxels, &[], &ChangeEvalConfig { min_voxels: 3, ..cfg() });
+        let s = score(&[1, 2, 3], &objects, &[], &voxels, &[], None, &ChangeEvalConfig { min_voxels: 3, ..cfg() });
         assert_eq!(s.appeared_present, Fraction::new(1, 2));
         assert_eq!(s.appeared_static_voxels, Fraction::new(4, 9));
         let seen: Vec<(u32, bool, bool)> = s.appeared.iter().map(|a| (a.object, a.seen, a.present)).collect();
@@ -1255,7 +1421,7 @@ mod tests {
         voxels.push(voxel([0.5, 0.0, 1.0], true, 1)); // a leftover
         voxels.push(voxel([1.0, 0.1, 1.5], false, 1)); // removed
         voxels.push(voxel([30.0, 0.0, 1.0], true, 1)); // a session not in the map: ignored
-        let s = score(&[1, 2], &[], &movers, &voxels, &[], &cfg());
+        let s = score(&[1, 2], &[], &movers, &voxels, &[], None, &cfg());
         assert_eq!(s.mover_voxels_static, Fraction::new(1, 2));
         assert_eq!(s.mover_static_of_static_map, Fraction::new(1, road + 2));
         assert_eq!(s.permanent_static, Fraction::new(road + 1, road + 1));
@@ -1293,7 +1459,7 @@ mod tests {
             ev(3, 20.1, Category::Coexist),             // came back: no removal
             ev(3, 40.1, Category::Coexist),             // came back where object 5 appeared: right
         ];
-        let s = score(&[1, 2, 3], &objects, &[], &voxels, &events, &cfg());
+        let s = score(&[1, 2, 3], &objects, &[], &voxels, &events, None, &cfg());
         let got: Vec<(u32, &str, usize, bool, bool)> =
             s.changes.iter().map(|c| (c.object, c.change, c.session, c.scored, c.correct)).collect();
         assert_eq!(

@@ -111,6 +111,8 @@ pub use assets::{Part, Surface};
 /// The simulator's beam directions of one frame, for tests of sensor-frame evidence.
 #[cfg(test)]
 pub(crate) use sensor_model::ray_directions;
+/// The simulated sensors' ranges, for evaluation code's "in view".
+pub(crate) use sensor_model::spec as sensor_spec;
 pub use shapes::{Shape, ShapeKind};
 pub use site::{ObjectId, SiteObject};
 pub use truth::{GroundTruth, GtSession, read_ground_truth};

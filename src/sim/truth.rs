@@ -37,6 +37,8 @@ pub struct GroundTruth {
     pub objects: Vec<SiteObject>,
     /// Sessions in order; `sessions[0]` is session 1.
     pub sessions: Vec<GtSession>,
+    /// The sensor model of `site.toml` (`None`: not one seam knows).
+    pub sensor: Option<crate::sensor::SensorModel>,
     index: StaticIndex,
 }
 
@@ -260,5 +262,6 @@ pub fn read_ground_truth(out_dir: &Path) -> Result<GroundTruth, SimError> {
         sessions.push(GtSession { number, dir, poses, t_world_session, movers });
     }
     let index = StaticIndex::new(&objects);
-    Ok(GroundTruth { out_dir: out_dir.to_path_buf(), objects, sessions, index })
+    let sensor = site.get("sensor").and_then(toml::Value::as_str).and_then(crate::sensor::SensorModel::parse);
+    Ok(GroundTruth { out_dir: out_dir.to_path_buf(), objects, sessions, sensor, index })
 }
