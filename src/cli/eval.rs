@@ -286,13 +286,11 @@ fn print_changes(r: &ChangesReport) {
     rows.insert(1, extra("on permanent objects", &s.permanent_static_objects));
     rows.insert(2, extra("ground and the rest", &s.permanent_static_ground));
     rows.insert(4, extra("of the voxels some session saw free", &s.removed_static_seen_free));
-    let mut at = 5;
+    rows.insert(6, extra("appeared objects' voxels static", &s.appeared_static_voxels));
+    rows.insert(8, extra("mover voxels static (of mover voxels)", &s.mover_voxels_static));
     if let Some(f) = &s.removed_static_in_view {
-        rows.insert(at, extra("of the voxels a later session had in view", f));
-        at += 1;
+        rows.insert(5, extra("of the voxels a later session had in view", f));
     }
-    rows.insert(at + 1, extra("appeared objects' voxels static", &s.appeared_static_voxels));
-    rows.insert(at + 3, extra("mover voxels static (of mover voxels)", &s.mover_voxels_static));
     rows.push(extra("removed objects", &s.events_removed_correct));
     rows.push(extra("appeared objects", &s.events_appeared_correct));
     print_table(&["metric", "value", "count", "goal", "met"], &rows);

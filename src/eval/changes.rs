@@ -283,6 +283,11 @@ fn by_category(counts: &[[u64; 2]; 6]) -> Vec<CategoryCount> {
         .collect()
 }
 
+/// `[voxels, static]` summed over categories.
+fn total(counts: &[[u64; 2]]) -> [u64; 2] {
+    counts.iter().fold([0, 0], |t, c| [t[0] + c[0], t[1] + c[1]])
+}
+
 fn category_index(c: Category) -> usize {
     Category::ALL.iter().position(|&x| x == c).unwrap_or(0)
 }
@@ -546,19 +551,18 @@ struct Acc {
     total: u64,
     permanent: [u64; 2],
     permanent_objects: [u64; 2],
-    removed: [u64; 2],
     removed_seen_free: [u64; 2],
     removed_in_view: [u64; 2],
     permanent_categories: [[u64; 2]; 6],
     /// By object index (`u32::MAX`: ground and the rest).
     permanent_objects_by_object: FxHashMap<u32, [u64; 2]>,
-    removed_categories: [[u64; 2]; 6],
     appeared: [u64; 2],
     mover: [u64; 2],
     /// Per object: [voxels, static] of its region against `first`.
     appeared_by_object: FxHashMap<u32, [u64; 2]>,
     /// Per removed object (the lowest index a voxel is of): [voxels, static]
-    /// by category after the last session.
+    /// by category after the last session; metric 2's totals and categories
+    /// are their sums.
     removed_by_object: FxHashMap<u32, [[u64; 2]; 6]>,
     /// Per case: region voxels that decide whether it is scored.
     case_voxels: Vec<u64>,
@@ -573,7 +577,6 @@ impl Acc {
         for (a, b) in [
             (&mut self.permanent, o.permanent),
             (&mut self.permanent_objects, o.permanent_objects),
-            (&mut self.removed, o.removed),
             (&mut self.removed_seen_free, o.removed_seen_free),
             (&mut self.removed_in_view, o.removed_in_view),
             (&mut self.appeared, o.appeared),
@@ -583,10 +586,6 @@ impl Acc {
             a[1] += b[1];
         }
         for (a, b) in self.permanent_categories.iter_mut().zip(o.permanent_categories) {
-            a[0] += b[0];
-            a[1] += b[1];
-        }
-        for (a, b) in self.removed_categories.iter_mut().zip(o.removed_categories) {
             a[0] += b[0];
             a[1] += b[1];
         }
@@ -651,14 +650,11 @@ pub fn score(
     let appeared_final: Vec<bool> = (0..objects.len())
         .map(|i| scene.relevant[i] && !objects[i].present_in(first) && objects[i].present_in(last))
         .collect();
-    // Per object, the sessions of the map after the last one it was present in.
-    let after_last: Vec<&[usize]> = objects
-        .iter()
-        .map(|o| {
-            let k = sessions.iter().rposition(|&s| o.present_in(s)).map_or(0, |k| k + 1);
-            &sessions[k..]
-        })
-        .collect();
+    // Per object, the position in `sessions` of the last one it was present
+    // in, and the sessions of the map after it.
+    let last_present: Vec<Option<usize>> =
+        objects.iter().map(|o| sessions.iter().rposition(|&s| o.present_in(s))).collect();
+    let after_last: Vec<&[usize]> = last_present.iter().map(|k| &sessions[k.map_or(0, |k| k + 1)..]).collect();
     let seen_later = |o: u32, p: [f64; 3]| view.map(|v| after_last[o as usize].iter().any(|&s| v.sees(s, p)));
     let mut cases: Vec<Case> = Vec::new();
     for (at, w) in sessions.windows(2).enumerate() {
@@ -704,14 +700,9 @@ pub fn score(
                 if let Some(&o) = l.of.iter().find(|&&o| removed_final[o as usize])
                     && scene.free_of_present(&l, last)
                 {
-                    acc.removed[0] += 1;
-                    acc.removed[1] += s;
                     let e = &mut acc.removed_by_object.entry(o).or_default()[category_index(v.category)];
                     e[0] += 1;
                     e[1] += s;
-                    let c = &mut acc.removed_categories[category_index(v.category)];
-                    c[0] += 1;
-                    c[1] += s;
                     if v.seen_free {
                         acc.removed_seen_free[0] += 1;
                         acc.removed_seen_free[1] += s;
@@ -852,9 +843,14 @@ pub fn score(
     }
     let permanent_by_class = class_counts(classes);
     let mut classes: BTreeMap<&str, [u64; 2]> = BTreeMap::new();
+    let mut removed_categories = [[0u64; 2]; 6];
     let mut removed_by_object: Vec<RemovedObject> = Vec::with_capacity(acc.removed_by_object.len());
     for (&o, counts) in &acc.removed_by_object {
-        let n = counts.iter().fold([0, 0], |t, c| [t[0] + c[0], t[1] + c[1]]);
+        for (all, c) in removed_categories.iter_mut().zip(counts) {
+            all[0] += c[0];
+            all[1] += c[1];
+        }
+        let n = total(counts);
         let object = &objects[o as usize];
         let e = classes.entry(object.class.as_str()).or_default();
         e[0] += n[0];
@@ -862,7 +858,7 @@ pub fn score(
         removed_by_object.push(RemovedObject {
             object: object.id,
             class: object.class.clone(),
-            last_present: sessions.iter().copied().filter(|&s| object.present_in(s)).max().unwrap_or(0),
+            last_present: last_present[o as usize].map_or(0, |k| sessions[k]),
             voxels: n[0],
             static_voxels: n[1],
             categories: by_category(counts),
@@ -881,13 +877,16 @@ pub fn score(
             acc.permanent[1] - acc.permanent_objects[1],
             acc.permanent[0] - acc.permanent_objects[0],
         ),
-        removed_static: Fraction::new(acc.removed[1], acc.removed[0]),
+        removed_static: {
+            let [n, s] = total(&removed_categories);
+            Fraction::new(s, n)
+        },
         removed_static_seen_free: Fraction::new(acc.removed_seen_free[1], acc.removed_seen_free[0]),
         removed_static_in_view: view.is_some().then(|| Fraction::new(acc.removed_in_view[1], acc.removed_in_view[0])),
         permanent_by_category: by_category(&acc.permanent_categories),
         permanent_by_class,
         removed_by_class,
-        removed_by_category: by_category(&acc.removed_categories),
+        removed_by_category: by_category(&removed_categories),
         removed_by_object,
         removed_objects: removed_final.iter().filter(|&&r| r).count(),
         appeared_present: Fraction::new(appeared.iter().filter(|a| a.present).count() as u64, seen),

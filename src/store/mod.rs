@@ -183,18 +183,15 @@ impl Store {
         Ok(store)
     }
 
-    /// Opens an existing store for reading. Never blocks on a writer and
-    /// never writes.
-    ///
-    /// A store written by an older seam is upgraded first, the one time a
-    /// reader writes: its pending migrations (each one transaction, columns
-    /// and tables added, nothing rewritten) under the writer lock. A reader
-    /// of the old schema would otherwise fail on the first column it lacks.
+    /// Opens an existing store for reading. Never blocks on a writer, and
+    /// writes only to upgrade a store an older seam wrote, once: its pending
+    /// migrations (each one transaction, columns and tables added, nothing
+    /// rewritten) under the writer lock. A reader of the old schema would
+    /// otherwise fail on the first column it lacks.
     pub fn open_read_only(root: &Path) -> Result<Store, StoreError> {
         check_is_store(root)?;
         let conn = open_conn(root, true)?;
-        schema::check_version(&conn, root)?;
-        if schema::user_version(&conn, root)? < schema::SCHEMA_VERSION {
+        if schema::check_version(&conn, root)? < schema::SCHEMA_VERSION {
             drop(conn);
             drop(Store::open(root)?);
             return Store::open_read_only(root);

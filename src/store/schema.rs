@@ -31,8 +31,9 @@ pub fn user_version(conn: &Connection, root: &Path) -> Result<i64, StoreError> {
     conn.query_row("PRAGMA user_version", [], |r| r.get(0)).map_err(|e| sql(root, e))
 }
 
-/// Refuses databases written by a newer seam, or that are not seam's at all.
-pub fn check_version(conn: &Connection, root: &Path) -> Result<(), StoreError> {
+/// Refuses databases written by a newer seam, or that are not seam's at all;
+/// returns the database's schema version.
+pub fn check_version(conn: &Connection, root: &Path) -> Result<i64, StoreError> {
     let v = user_version(conn, root)
         .map_err(|e| StoreError::NotSeamDb { path: root.to_path_buf(), reason: e.to_string() })?;
     if v > SCHEMA_VERSION {
@@ -50,7 +51,7 @@ pub fn check_version(conn: &Connection, root: &Path) -> Result<(), StoreError> {
             reason: format!("{DB_FILE} has no seam schema (user_version {v})"),
         });
     }
-    Ok(())
+    Ok(v)
 }
 
 /// Applies every migration newer than the database, each in its own transaction.
