@@ -6,7 +6,9 @@
 //! ```
 //!
 //! Poses: `gt/poses.txt` when the folder has one (a simulated session's true
-//! poses), else the layout's own (SemanticKITTI's). `--set` overrides
+//! poses), else the layout's own (SemanticKITTI's). `--poses FILE` (KITTI
+//! format, one line per keyframe, e.g. what `seam poses` writes) replaces
+//! them, to see what the estimated poses cost. `--set` overrides
 //! `EvidenceConfig` fields by their TOML names (e.g. `--set alpha0=0.05
 //! --set model=log_odds`); several `--set` groups separated by `--vs` are run
 //! one after another on the same scans.
@@ -61,18 +63,22 @@ fn run() -> Result<(), String> {
     let dir = PathBuf::from(args.first().ok_or("usage: dor_probe SESSION_DIR [--set k=v ...] [--vs ...]")?);
     let mut groups: Vec<Vec<String>> = vec![Vec::new()];
     let mut submap_kf = 20usize;
+    let mut poses_file: Option<PathBuf> = None;
     let mut it = args[1..].iter();
     while let Some(a) = it.next() {
         match a.as_str() {
             "--set" => groups.last_mut().unwrap().push(it.next().ok_or("--set needs key=value")?.clone()),
             "--vs" => groups.push(Vec::new()),
             "--submap-kf" => submap_kf = it.next().and_then(|v| v.parse().ok()).ok_or("--submap-kf N")?,
+            "--poses" => poses_file = Some(PathBuf::from(it.next().ok_or("--poses FILE")?)),
             other => return Err(format!("unknown argument {other}")),
         }
     }
     let src = detect_session(&dir).map_err(|e| e.to_string())?;
     let gt = dir.join("gt/poses.txt");
-    let poses: Vec<_> = if gt.exists() {
+    let poses: Vec<_> = if let Some(f) = &poses_file {
+        read_kitti_poses(f).map_err(|e| e.to_string())?
+    } else if gt.exists() {
         read_kitti_poses(&gt).map_err(|e| e.to_string())?
     } else {
         src.keyframes.iter().map(|k| k.t_session_sensor).collect()
@@ -135,6 +141,10 @@ fn run() -> Result<(), String> {
                 h[is_moving_label(l) as usize][((e * 10.0) as usize).min(9)] += 1;
             }
             println!("  eps_l deciles, static : {:?}\n  eps_l deciles, dynamic: {:?}", h[0], h[1]);
+            // Moving points kept: at ε_min (no evidence of free space), or above it but too weak.
+            let kept = || verdicts().filter(|&(_, l, d, _)| is_moving_label(l) && !d);
+            let unfreed = kept().filter(|&(_, _, _, e)| f64::from(e) <= cfg.eps_min + 1e-6).count();
+            println!("  moving points kept: {} at eps_min, {} above it", unfreed, kept().count() - unfreed);
         }
         if let Some(path) = std::env::var_os("DOR_DUMP") {
             // Every point's eps_l (f32) then dynamic (u8), in scan order.
@@ -159,6 +169,30 @@ fn run() -> Result<(), String> {
                 print!(" kf{kf} {r}/{n}");
             }
             println!();
+        }
+        if std::env::var_os("DOR_MISSES").is_some() {
+            // Moving points kept, by height over the lowest point of their
+            // 1 m column in the same keyframe (≈ the ground), 0.1 m bins.
+            let mut hist = [[0usize; 21]; 2];
+            let mut row = 0;
+            for (i, p) in scans.iter().enumerate() {
+                let world = seam::geometry::transformed(p, &poses[i]);
+                let cell = |q: &[f64; 3]| ((q[0]).floor() as i64, (q[1]).floor() as i64);
+                let mut low: std::collections::HashMap<(i64, i64), f64> = Default::default();
+                for q in &world {
+                    let e = low.entry(cell(q)).or_insert(f64::MAX);
+                    *e = e.min(q[2]);
+                }
+                for (j, q) in world.iter().enumerate() {
+                    if is_moving_label(labels[i][j]) {
+                        let b = (((q[2] - low[&cell(q)]) / 0.1) as usize).min(20);
+                        hist[out.labels.dynamic[row + j] as usize][b] += 1;
+                    }
+                }
+                row += p.len();
+            }
+            println!("  moving points by height over their column's lowest point (0.1 m bins, last ≥ 2 m)");
+            println!("    kept   : {:?}\n    removed: {:?}", hist[0], hist[1]);
         }
         if std::env::var_os("DOR_CLASSES").is_some() {
             let mut by_class: BTreeMap<u16, (usize, usize)> = BTreeMap::new();

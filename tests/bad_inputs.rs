@@ -296,6 +296,10 @@ fn bad_evidence_settings_and_dor_inputs() {
     std::fs::write(&grow_depth, "[evidence]\ngrow_depth_voxels = 40\n").unwrap();
     let grow_hits = t.path().join("grow_hits.toml");
     std::fs::write(&grow_hits, "[evidence]\ngrow_max_hits = -1\n").unwrap();
+    let footing = t.path().join("footing.toml");
+    std::fs::write(&footing, "[evidence]\nfooting_height_m = -0.05\n").unwrap();
+    let footing_kf = t.path().join("footing_kf.toml");
+    std::fs::write(&footing_kf, "[evidence]\nfooting_max_keyframes = 0\n").unwrap();
     for (cfg, fragment) in [
         (&model, "octomap"),
         (&clearance, "free_clearance_m"),
@@ -312,6 +316,8 @@ fn bad_evidence_settings_and_dor_inputs() {
         (&guard_deg, "free_guard_deg"),
         (&grow_depth, "grow_depth_voxels"),
         (&grow_hits, "grow_max_hits"),
+        (&footing, "footing_height_m"),
+        (&footing_kf, "footing_max_keyframes"),
     ] {
         let o = run(&["--config", cfg.to_str().unwrap(), "ingest", st, dir]);
         assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));

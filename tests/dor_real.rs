@@ -95,5 +95,13 @@ fn semantickitti_dor_keeps_static_structure_and_removes_movers() {
             "{seq}: the growth step removed no more movers: {seam} vs {no_grow}"
         );
         assert!(f(&no_grow, "pr") >= f(&seam, "pr"), "{seq}: growth cannot keep more static points");
+        // Measured F1 93.84 → 94.77 (04) and 18.20 → 18.58 % (08) with the
+        // footing step: movers' points within 0.2 m of the ground.
+        let no_footing =
+            dor_scores(&dir, tmp.path(), &format!("kitti{seq}-no-footing"), "[evidence]\nfooting_height_m = 0.0\n");
+        assert!(
+            f(&seam, "dynamic_removed") > f(&no_footing, "dynamic_removed") && f(&seam, "f1") > f(&no_footing, "f1"),
+            "{seq}: the footing step removed no more movers: {seam} vs {no_footing}"
+        );
     }
 }

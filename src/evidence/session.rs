@@ -27,7 +27,7 @@ use super::grid::{
     Box3, InterestEvidence, RayStats, Row, add_points_by_row, bit_set, pack, packed_key, row_of, unpack,
 };
 use super::ground::GroundLevel;
-use super::grow::keyframe_dynamic;
+use super::grow::{footing_candidates, keyframe_dynamic, stands_on_ground};
 use super::no_return::{NoReturn, NoReturnImage};
 use super::raycast::voxel_key;
 use super::stats::{EvidenceConfig, FreeTest};
@@ -79,7 +79,8 @@ pub struct GenerationStats {
     pub generated_voxels: usize,
     pub dynamic_voxels: usize,
     pub dynamic_points: usize,
-    /// Of those, the points made dynamic by the growth step (`evidence::grow`).
+    /// Of those, the points made dynamic by the growth and footing steps
+    /// (`evidence::grow`), not by their own voxel's ε_l.
     pub grown_points: usize,
     pub cleaned_voxels: usize,
     pub raycast_s: f64,
@@ -371,25 +372,51 @@ fn label_points(
     dynamic: &[bool],
     cfg: &EvidenceConfig,
 ) -> (PointLabels, usize) {
-    let parts: Vec<(PointLabels, usize)> = keyframes
+    let footing_on = cfg.footing_height_m > 0.0 && session.ground().is_some();
+    // The rows at ground level, a bit each: one test per point below.
+    let ground_rows: Vec<u64> = match session.ground() {
+        Some(g) if footing_on => {
+            let keys = session.keys();
+            (0..keys.len().div_ceil(64))
+                .into_par_iter()
+                .map(|w| {
+                    let rows = w * 64..(w * 64 + 64).min(keys.len());
+                    rows.filter(|&i| g.at_ground(&unpack(keys[i]).0) == Some(true)).fold(0u64, |b, i| b | 1 << (i % 64))
+                })
+                .collect()
+        }
+        _ => Vec::new(),
+    };
+    let mut parts: Vec<KeyframeLabels> = keyframes
         .par_iter()
         .map(|kf| {
             // A point without a row (non-finite, out of range) is kept:
             // there is no evidence that it moved.
             let rows: Vec<Option<usize>> = world_points(kf).iter().map(|p| row_at(session, p)).collect();
             let (verdicts, grown) = keyframe_dynamic(&rows, session, dynamic, session.ground(), cfg);
-            let l = PointLabels {
+            let (mut feet, mut band) = (Vec::new(), Vec::new());
+            if let (true, Some(g)) = (footing_on, session.ground()) {
+                feet = footing_candidates(&rows, session, &verdicts, g);
+                band = (rows.iter().enumerate())
+                    .filter_map(|(j, r)| r.filter(|&r| bit_set(&ground_rows, r)).map(|r| (j as u32, r as u32)))
+                    .collect();
+            }
+            let labels = PointLabels {
                 keyframe: vec![kf.index as i32; rows.len()],
                 point_index: (0..rows.len() as i32).collect(),
                 dynamic: verdicts,
                 eps_l: rows.iter().map(|i| i.map_or(cfg.eps_min as f32, |i| eps[i])).collect(),
             };
-            (l, grown)
+            KeyframeLabels { labels, grown, feet, band }
         })
         .collect();
+    let grown_feet = match session.ground() {
+        Some(g) if footing_on => footing(keyframes, session, g, &mut parts, cfg),
+        _ => 0,
+    };
     let mut out = PointLabels::default();
-    let mut grown = 0;
-    for (p, g) in parts {
+    let mut grown = grown_feet;
+    for KeyframeLabels { labels: p, grown: g, .. } in parts {
         out.keyframe.extend(p.keyframe);
         out.point_index.extend(p.point_index);
         out.dynamic.extend(p.dynamic);
@@ -397,6 +424,92 @@ fn label_points(
         grown += g;
     }
     (out, grown)
+}
+
+/// One keyframe's labels in [`label_points`], before the footing step.
+struct KeyframeLabels {
+    labels: PointLabels,
+    /// Points the growth step made dynamic.
+    grown: usize,
+    /// The footing step's candidates ([`footing_candidates`]) and every
+    /// point at ground level: `(point index, row)`.
+    feet: Vec<(u32, u32)>,
+    band: Vec<(u32, u32)>,
+}
+
+/// The footing step (`evidence::grow`'s docs): each keyframe's candidates
+/// that stand on the ground of their column ([`stands_on_ground`]) become
+/// dynamic; how many did. Only the ground-level voxels of the candidates'
+/// columns are looked at again, so the step costs a pass over the keyframes'
+/// ground-level rows, not another transform of every point.
+fn footing(
+    keyframes: &[KeyframeInput<'_>],
+    session: &InterestEvidence,
+    ground: &GroundLevel,
+    parts: &mut [KeyframeLabels],
+    cfg: &EvidenceConfig,
+) -> usize {
+    let keys = session.keys();
+    let column = |row: u32| {
+        let k = unpack(keys[row as usize]).0;
+        (k[0], k[1])
+    };
+    // The ground-level rows of the candidates' columns (the band is two
+    // voxels high, so each is the candidate's row or one above or below).
+    let mut in_band = vec![0u64; session.len().div_ceil(64)];
+    let mut any = false;
+    for &(_, r) in parts.iter().flat_map(|p| &p.feet) {
+        let k = unpack(keys[r as usize]).0;
+        for dz in -1..=1 {
+            let n = [k[0], k[1], k[2] + dz];
+            if ground.at_ground(&n) == Some(true)
+                && let Some(i) = pack(VoxelKey(n)).and_then(|n| session.find(n))
+            {
+                in_band[i / 64] |= 1 << (i % 64);
+                any = true;
+            }
+        }
+    }
+    if !any {
+        return 0;
+    }
+    // Their points' heights, every keyframe's: (keyframe, z) per column.
+    let z_of = |kf: &KeyframeInput<'_>, j: u32| {
+        let p = kf.points[j as usize];
+        (kf.t_world_keyframe * Point3::new(p[0] as f64, p[1] as f64, p[2] as f64)).z
+    };
+    let band: FxHashMap<(i32, i32), Vec<(u32, f32)>> = keyframes
+        .par_iter()
+        .zip(parts.par_iter())
+        .enumerate()
+        .fold(FxHashMap::default, |mut acc: FxHashMap<(i32, i32), Vec<(u32, f32)>>, (i, (kf, p))| {
+            for &(j, r) in &p.band {
+                if bit_set(&in_band, r as usize) {
+                    acc.entry(column(r)).or_default().push((i as u32, z_of(kf, j) as f32));
+                }
+            }
+            acc
+        })
+        .reduce(FxHashMap::default, |mut a, b| {
+            for (c, mut v) in b {
+                a.entry(c).or_default().append(&mut v);
+            }
+            a
+        });
+    let max_others = (cfg.footing_max_keyframes as usize).saturating_sub(1);
+    let mut added = 0;
+    for (i, (kf, p)) in keyframes.iter().zip(parts.iter_mut()).enumerate() {
+        for &(j, r) in &p.feet {
+            let stands = band
+                .get(&column(r))
+                .is_some_and(|b| stands_on_ground(i as u32, z_of(kf, j), b, cfg.footing_height_m, max_others));
+            if stands {
+                p.labels.dynamic[j as usize] = true;
+                added += 1;
+            }
+        }
+    }
+    added
 }
 
 /// The static points of a submap's keyframes (each with its points'
@@ -971,10 +1084,13 @@ mod tests {
         let cfg = EvidenceConfig::default();
         let (low, middle) = removed(&cfg);
         assert!(low > 0.8 && middle > 0.8, "defaults: lowest layer {low:.2}, middle {middle:.2} removed");
-        let clearance = EvidenceConfig { clearance_near_ground_only: false, ..cfg.clone() };
+        // Each rule on its own, without the footing step (which takes the
+        // lowest layer's points beside a removed middle).
+        let no_footing = EvidenceConfig { footing_height_m: 0.0, ..cfg.clone() };
+        let clearance = EvidenceConfig { clearance_near_ground_only: false, ..no_footing.clone() };
         let (_, middle_old) = removed(&clearance);
         assert!(middle_old < 0.2, "the clearance on every downward ray keeps the middle: {middle_old:.2}");
-        let guard = EvidenceConfig { ground_hits_guard: true, ..cfg.clone() };
+        let guard = EvidenceConfig { ground_hits_guard: true, ..no_footing };
         let (low_old, _) = removed(&guard);
         assert!(low_old < 0.2, "ground hits guarding keep the lowest layer: {low_old:.2}");
         // No ground point is removed.
@@ -982,6 +1098,81 @@ mod tests {
         let ground = scans.iter().flatten().zip(&out.labels.dynamic).filter(|(p, _)| (p[2] as f64 + 1.8).abs() < 1e-3);
         let (total, gone) = ground.fold((0, 0), |(t, g), (_, &d)| (t + 1, g + d as usize));
         assert!(total > 10_000 && gone == 0, "{gone} of {total} ground points removed");
+    }
+
+    /// A person walking across the view, each keyframe somewhere else: the
+    /// rays to the ground behind where they stood end within the ground's
+    /// clearance of their feet, so no ray frees the layer they stand in, and
+    /// growth never enters a column's lowest voxel. The footing step takes
+    /// their feet out of it; with it off they stay. No ground point goes,
+    /// nor any of a kerb beside their path.
+    #[test]
+    fn a_walking_persons_feet_go_with_the_footing_step() {
+        let n = 8;
+        let poses: Vec<Pose> = (0..n)
+            .map(|i| Pose::from_parts(Translation3::new(0.5 * i as f64, 0.0, 1.8), UnitQuaternion::identity()))
+            .collect();
+        let person_at = |i: usize| {
+            let y = -3.0 + 0.8 * i as f64;
+            ([8.0, y, 0.0], [8.4, y + 0.4, 1.7])
+        };
+        let wall = ([30.0, -30.0, 0.0], [31.0, 30.0, 6.0]);
+        // A kerb just behind the person's path, 0.15 m high.
+        let kerb = ([8.5, -4.0, 0.0], [9.0, 4.0, 0.15]);
+        let scans: Vec<Vec<[f32; 3]>> = (0..n)
+            .map(|i| spin_scan(poses[i].translation.vector.into(), 1024, 60.0, &[person_at(i), wall, kerb]))
+            .collect();
+        let inputs = inputs_of(&scans, &poses, usize::MAX);
+        // (removed, all) of the person's points 0.06-0.2 m up (above the
+        // footing height) and above 0.4 m; the ground and kerb points removed.
+        let count = |cfg: &EvidenceConfig| {
+            let out = generate(&inputs, &[], None, cfg, |_| {});
+            let (mut feet, mut body, mut ground, mut on_kerb) = ((0, 0), (0, 0), 0, 0);
+            let mut row = 0;
+            for (i, scan) in scans.iter().enumerate() {
+                let (lo, hi) = person_at(i);
+                let o = poses[i].translation.vector;
+                for p in scan {
+                    let w = [p[0] as f64 + o.x, p[1] as f64 + o.y, p[2] as f64 + o.z];
+                    let d = out.labels.dynamic[row] as usize;
+                    row += 1;
+                    let inside = (0..2).all(|a| w[a] > lo[a] - 1e-3 && w[a] < hi[a] + 1e-3);
+                    let c = match w[2] {
+                        z if z.abs() < 1e-3 => {
+                            ground += d;
+                            continue;
+                        }
+                        z if inside && z > 0.06 && z < 0.2 => &mut feet,
+                        z if inside && z > 0.4 => &mut body,
+                        _ if w[0] > kerb.0[0] - 1e-3 => {
+                            on_kerb += d;
+                            continue;
+                        }
+                        _ => continue,
+                    };
+                    c.0 += d;
+                    c.1 += 1;
+                }
+            }
+            (feet, body, ground, on_kerb)
+        };
+        let cfg = EvidenceConfig::default();
+        let (feet, body, ground, on_kerb) = count(&cfg);
+        let off = EvidenceConfig { footing_height_m: 0.0, ..cfg.clone() };
+        let (feet_off, body_off, ground_off, _) = count(&off);
+        let any = EvidenceConfig { footing_max_keyframes: 100, ..cfg.clone() };
+        let (feet_any, _, _, on_kerb_any) = count(&any);
+        assert!(feet.1 >= 10 && body.1 >= 100, "the person has points: {feet:?} {body:?}");
+        assert!(body.0 * 10 >= body.1 * 9, "the body is removed: {body:?}");
+        assert!(feet.0 * 10 >= feet.1 * 9, "footing on: the feet are removed: {feet:?}");
+        assert!(feet_off.0 * 2 <= feet_off.1, "footing off: most of the feet stay: {feet_off:?}");
+        assert_eq!(body_off, body, "the footing step leaves the body alone");
+        assert_eq!((ground, ground_off), (0, 0), "no ground point is removed");
+        // The kerb's top beside the person's feet is seen there by many
+        // keyframes: kept. Without that limit the step takes some of it.
+        assert_eq!(on_kerb, 0, "no kerb point is removed");
+        assert_eq!(feet_any, feet);
+        assert!(on_kerb_any > 0, "any number of keyframes: the kerb beside the feet goes too");
     }
 
     /// The layer of a removed object just above the ground this session

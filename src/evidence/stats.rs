@@ -139,6 +139,15 @@ pub struct EvidenceConfig {
     pub grow_max_hits: u32,
     /// ... at most this many voxel steps from a voxel dynamic by ε_l.
     pub grow_depth_voxels: u32,
+    /// DOR's footing step (`evidence::grow`): a static point in a voxel at
+    /// its column's ground level, beside a voxel with a dynamic point of the
+    /// same keyframe, becomes dynamic when it lies more than this above the
+    /// lowest point any keyframe put in its column, m. 0 disables it.
+    pub footing_height_m: f64,
+    /// ... and when at most this many keyframes, its own included, put a
+    /// point that high at ground level in that column (a static kerb, bush
+    /// or fence foot is seen there by many).
+    pub footing_max_keyframes: u32,
     /// A ray that ends below the sensor (by 0.5 m or more) frees only voxels
     /// whose centre is at least this much above its endpoint. Rays to the ground graze it for
     /// metres before they end (at 40 m a ray from 1.7 m height runs within one
@@ -445,6 +454,8 @@ impl Default for EvidenceConfig {
             static_neighbour_veto: false,
             grow_max_hits: 2,
             grow_depth_voxels: 2,
+            footing_height_m: 0.05,
+            footing_max_keyframes: 2,
             free_clearance_m: 0.2,
             clearance_near_ground_only: true,
             ceiling_clearance: true,
@@ -492,6 +503,7 @@ impl EvidenceConfig {
             ("no_return_range_m", self.no_return_range_m),
             ("no_return_clear_m", self.no_return_clear_m),
             ("no_return_reach_factor", self.no_return_reach_factor),
+            ("footing_height_m", self.footing_height_m),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(format!("evidence.{name} is {v}; it must be zero or a positive number"));
@@ -502,6 +514,11 @@ impl EvidenceConfig {
                 "evidence.grow_depth_voxels is {}; it must lie in 0..=8 voxel steps (default 2; 0 turns growth off)",
                 self.grow_depth_voxels
             ));
+        }
+        if self.footing_max_keyframes == 0 {
+            return Err("evidence.footing_max_keyframes is 0; it must be at least 1, the point's own keyframe \
+                        (default 2; footing_height_m = 0 turns the footing step off)"
+                .into());
         }
         if !(0.0..=2.0).contains(&self.free_guard_deg) {
             return Err(format!(
