@@ -23,8 +23,8 @@ Per dataset:
    is free), and into a fourth with CEILING_TOML ("any-free-ray ceiling": a
    point is removed as soon as any ray of another keyframe crossed its
    voxel, with rays to every point, no guard, no clearance, no surface
-   test, no weighing against hits and no growth step). That row's PR is
-   meaningless; its RR is the share of moving points that any method
+   test, no weighing against hits and no growth or footing step). That
+   row's PR is meaningless; its RR is the share of moving points that any method
    removing only space some ray saw empty can reach at 0.2 m, and
    2·RR/(1+RR) the F1 it allows at a PR of 100 %.
 2. `seam poses STORE --session NAME --format kitti` (and `--format json`
@@ -97,7 +97,8 @@ VOXEL_TOML = '[evidence]\nfree_test = "voxel"\n'
 # voxel has free evidence (ω's floor 1 so one direction counts; the lower
 # clamp 0 so τ_dyn just above 0 separates f = 0 from f > 0).
 CEILING_TOML = ('[evidence]\nfree_test = "voxel"\none_ray_per_voxel = false\nfree_guard_voxels = 0\nfree_guard_deg = 0\n'
-                'free_clearance_m = 0\nomega_floor = 1\neps_min = 0\ntau_dyn = 0.000001\ngrow_max_hits = 0\n')
+                'free_clearance_m = 0\nomega_floor = 1\neps_min = 0\ntau_dyn = 0.000001\ngrow_max_hits = 0\n'
+                'footing_height_m = 0\n')
 SENSORS = "os1-64,hdl-64e,vlp16,hdl-32e,avia"
 DUFOMAP_DEFAULT = "0.1,0.2,1;0.1,0.2,2;0.2,0.2,1"
 

@@ -14,11 +14,13 @@
 //! one after another on the same scans.
 //!
 //! Diagnostics, by environment variable: `DOR_HIST=1` prints ε_l deciles of
-//! static and moving points, `DOR_CLASSES=1` the removed share per semantic
-//! class, `DOR_INSTANCES=1` the removed moving points per instance and
-//! keyframe, and `DOR_DUMP=FILE` writes every point's ε_l (f32, little
-//! endian) followed by its verdict (one byte each), in scan order, for
-//! comparing with another tool's labels point by point.
+//! static and moving points and how many kept moving points have ε_l at
+//! `eps_min`, `DOR_CLASSES=1` the removed share per semantic class,
+//! `DOR_INSTANCES=1` the removed moving points per instance and keyframe,
+//! `DOR_MISSES=1` the moving points kept and removed by height over their
+//! 0.2 m column's lowest static point, and `DOR_DUMP=FILE` writes every
+//! point's ε_l (f32, little endian) followed by its verdict (one byte each),
+//! in scan order, for comparing with another tool's labels point by point.
 
 use seam::eval::dor::{DorAccumulator, render_table};
 use seam::evidence::EvidenceConfig;
@@ -171,27 +173,32 @@ fn run() -> Result<(), String> {
             println!();
         }
         if std::env::var_os("DOR_MISSES").is_some() {
-            // Moving points kept, by height over the lowest point of their
-            // 1 m column in the same keyframe (≈ the ground), 0.1 m bins.
-            let mut hist = [[0usize; 21]; 2];
-            let mut row = 0;
-            for (i, p) in scans.iter().enumerate() {
-                let world = seam::geometry::transformed(p, &poses[i]);
-                let cell = |q: &[f64; 3]| ((q[0]).floor() as i64, (q[1]).floor() as i64);
-                let mut low: std::collections::HashMap<(i64, i64), f64> = Default::default();
-                for q in &world {
-                    let e = low.entry(cell(q)).or_insert(f64::MAX);
+            // Moving points by height over their 0.2 m column's floor: the
+            // lowest static point any keyframe put in it (≈ the ground).
+            // 0.1 m bins, then 2 m and more, then no floor at all.
+            let cell = |q: &[f64; 3]| ((q[0] / 0.2).floor() as i64, (q[1] / 0.2).floor() as i64);
+            let world: Vec<Vec<[f64; 3]>> =
+                scans.iter().zip(&poses).map(|(p, t)| seam::geometry::transformed(p, t)).collect();
+            let mut floor: std::collections::HashMap<(i64, i64), f64> = Default::default();
+            for (i, w) in world.iter().enumerate() {
+                for (_, q) in w.iter().enumerate().filter(|&(j, _)| !is_moving_label(labels[i][j])) {
+                    let e = floor.entry(cell(q)).or_insert(f64::MAX);
                     *e = e.min(q[2]);
                 }
-                for (j, q) in world.iter().enumerate() {
+            }
+            let mut hist = [[0usize; 22]; 2];
+            let mut row = 0;
+            for (i, w) in world.iter().enumerate() {
+                for (j, q) in w.iter().enumerate() {
                     if is_moving_label(labels[i][j]) {
-                        let b = (((q[2] - low[&cell(q)]) / 0.1) as usize).min(20);
+                        let b = floor.get(&cell(q)).map_or(21, |f| (((q[2] - f).max(0.0) / 0.1) as usize).min(20));
                         hist[out.labels.dynamic[row + j] as usize][b] += 1;
                     }
                 }
-                row += p.len();
+                row += w.len();
             }
-            println!("  moving points by height over their column's lowest point (0.1 m bins, last ≥ 2 m)");
+            println!("  moving points by height over their 0.2 m column's lowest static point");
+            println!("  (0.1 m bins, then 2 m and more, then no static point in the column)");
             println!("    kept   : {:?}\n    removed: {:?}", hist[0], hist[1]);
         }
         if std::env::var_os("DOR_CLASSES").is_some() {
