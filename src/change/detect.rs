@@ -55,6 +55,18 @@ pub struct ChangeConfig {
     /// η of the emerged-overlap update.
     pub eta: f64,
     /// ε_g is clamped to `[eps_g_min, eps_g_max]` after every update.
+    ///
+    /// Tried and not taken: `eps_g_min = 0.2`, so that one session's
+    /// weaker free evidence (`w` 0.6 instead of 0.8, three keyframes instead
+    /// of five) takes a long-static voxel out of the static map. On the
+    /// sites of `bench/change_sites.py` (2026-12-06), permanent voxels lost /
+    /// removed-object voxels no longer left: OS1-64 521 / 69 (removed left
+    /// 6.67 → 6.37 %), HDL-64E 581 / 19 (4.52 → 4.39 %), HDL-32E 466 / 334
+    /// (6.76 → 5.04 %), VLP-16 695 / 386 (9.47 → 7.29 %), Avia 734 / 248
+    /// (39.88 → 38.46 %); permanent structure kept 99.21-99.58 % instead of
+    /// 99.30-99.73 %. 1.4 to 30 permanent voxels lost for each removed
+    /// one; 0.15 changed nothing that matters (OS1-64 6.67, HDL-32E 6.72 %),
+    /// 0.25 on the OS1-64 lost 697 for 72 (6.35 %).
     pub eps_g_min: f64,
     pub eps_g_max: f64,
     /// The static map is the voxels with ε_g below this.
