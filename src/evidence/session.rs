@@ -152,7 +152,7 @@ pub fn generate(
         keys.extend_from_slice(k);
     }
     let mut session = InterestEvidence::new(keys, v);
-    if cfg.clearance_near_ground_only || !cfg.ground_hits_guard || cfg.grow_max_hits > 0 {
+    if cfg.clearance_near_ground_only || !cfg.ground_hits_guard || cfg.grow_max_hits > 0 || cfg.footing_height_m > 0.0 {
         session.set_ground(GroundLevel::from_keys(per_kf.iter().flat_map(|(k, _)| k)));
     }
     // Rows some point of this session occupies: what vacated map voxels and
