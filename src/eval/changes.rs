@@ -673,81 +673,73 @@ pub fn score(
         cases_of.entry(case.object).or_default().push(c);
     }
 
+    let empty = || Acc { case_voxels: vec![0; cases.len()], case_in_view: vec![0; cases.len()], ..Acc::default() };
     let acc = voxels
         .par_iter()
-        .fold(
-            || Acc { case_voxels: vec![0; cases.len()], case_in_view: vec![0; cases.len()], ..Acc::default() },
-            |mut acc, v| {
-                let s = u64::from(v.is_static);
-                acc.total += 1;
-                acc.static_total += s;
-                let l = scene.locate(v.xyz);
-                if !l.changing {
-                    acc.permanent[0] += 1;
-                    acc.permanent[1] += s;
-                    let c = &mut acc.permanent_categories[category_index(v.category)];
-                    c[0] += 1;
-                    c[1] += s;
-                    let on = l.near.iter().copied().find(|&o| scene.permanent[o as usize]);
-                    if on.is_some() {
-                        acc.permanent_objects[0] += 1;
-                        acc.permanent_objects[1] += s;
-                    }
-                    let e = acc.permanent_objects_by_object.entry(on.unwrap_or(u32::MAX)).or_default();
+        .fold(empty, |mut acc, v| {
+            let s = u64::from(v.is_static);
+            acc.total += 1;
+            acc.static_total += s;
+            let l = scene.locate(v.xyz);
+            if !l.changing {
+                acc.permanent[0] += 1;
+                acc.permanent[1] += s;
+                let c = &mut acc.permanent_categories[category_index(v.category)];
+                c[0] += 1;
+                c[1] += s;
+                let on = l.near.iter().copied().find(|&o| scene.permanent[o as usize]);
+                if on.is_some() {
+                    acc.permanent_objects[0] += 1;
+                    acc.permanent_objects[1] += s;
+                }
+                let e = acc.permanent_objects_by_object.entry(on.unwrap_or(u32::MAX)).or_default();
+                e[0] += 1;
+                e[1] += s;
+            }
+            if let Some(&o) = l.of.iter().find(|&&o| removed_final[o as usize])
+                && scene.free_of_present(&l, last)
+            {
+                let e = &mut acc.removed_by_object.entry(o).or_default()[category_index(v.category)];
+                e[0] += 1;
+                e[1] += s;
+                if v.seen_free {
+                    acc.removed_seen_free[0] += 1;
+                    acc.removed_seen_free[1] += s;
+                }
+                if seen_later(o, v.xyz) == Some(true) {
+                    acc.removed_in_view[0] += 1;
+                    acc.removed_in_view[1] += s;
+                }
+            }
+            if l.of.iter().any(|&o| appeared_final[o as usize]) && scene.free_of_present(&l, first) {
+                acc.appeared[0] += 1;
+                acc.appeared[1] += s;
+                for &o in l.of.iter().filter(|&&o| appeared_final[o as usize]) {
+                    let e = acc.appeared_by_object.entry(o).or_default();
                     e[0] += 1;
                     e[1] += s;
                 }
-                if let Some(&o) = l.of.iter().find(|&&o| removed_final[o as usize])
-                    && scene.free_of_present(&l, last)
-                {
-                    let e = &mut acc.removed_by_object.entry(o).or_default()[category_index(v.category)];
-                    e[0] += 1;
-                    e[1] += s;
-                    if v.seen_free {
-                        acc.removed_seen_free[0] += 1;
-                        acc.removed_seen_free[1] += s;
-                    }
-                    if seen_later(o, v.xyz) == Some(true) {
-                        acc.removed_in_view[0] += 1;
-                        acc.removed_in_view[1] += s;
-                    }
-                }
-                if l.of.iter().any(|&o| appeared_final[o as usize]) && scene.free_of_present(&l, first) {
-                    acc.appeared[0] += 1;
-                    acc.appeared[1] += s;
-                    for &o in l.of.iter().filter(|&&o| appeared_final[o as usize]) {
-                        let e = acc.appeared_by_object.entry(o).or_default();
-                        e[0] += 1;
-                        e[1] += s;
-                    }
-                }
-                if l.mover && l.near.is_empty() {
-                    acc.mover[0] += 1;
-                    acc.mover[1] += s;
-                }
-                for &o in &l.of {
-                    for &c in cases_of.get(&o).map(Vec::as_slice).unwrap_or_default() {
-                        let case = &cases[c];
-                        let seen = if case.removed {
-                            pos_of(v.first_session) < case.at
-                        } else {
-                            v.first_session == case.session
-                        };
-                        if seen && scene.free_of_present(&l, case.reference) {
-                            acc.case_voxels[c] += 1;
-                            if view.is_some_and(|w| w.sees(case.session, v.xyz)) {
-                                acc.case_in_view[c] += 1;
-                            }
+            }
+            if l.mover && l.near.is_empty() {
+                acc.mover[0] += 1;
+                acc.mover[1] += s;
+            }
+            for &o in &l.of {
+                for &c in cases_of.get(&o).map(Vec::as_slice).unwrap_or_default() {
+                    let case = &cases[c];
+                    let seen =
+                        if case.removed { pos_of(v.first_session) < case.at } else { v.first_session == case.session };
+                    if seen && scene.free_of_present(&l, case.reference) {
+                        acc.case_voxels[c] += 1;
+                        if view.is_some_and(|w| w.sees(case.session, v.xyz)) {
+                            acc.case_in_view[c] += 1;
                         }
                     }
                 }
-                acc
-            },
-        )
-        .reduce(
-            || Acc { case_voxels: vec![0; cases.len()], case_in_view: vec![0; cases.len()], ..Acc::default() },
-            Acc::merge,
-        );
+            }
+            acc
+        })
+        .reduce(empty, Acc::merge);
 
     // Events in each case's region, by (session, category).
     let case_events: Vec<BTreeMap<(usize, Category), u64>> = events

@@ -68,9 +68,10 @@
 //! from seeds some keyframes saw free twice or more (less RR everywhere);
 //! keeping the ground band's upper voxel too (less RR everywhere).
 
-use super::grid::{InterestEvidence, pack, unpack};
+use super::grid::{InterestEvidence, bit_set, pack, unpack};
 use super::ground::GroundLevel;
 use super::stats::EvidenceConfig;
+use rayon::prelude::*;
 use rustc_hash::{FxHashMap, FxHashSet};
 
 /// One keyframe's DOR verdict per point: its voxel's (`dynamic`, one flag per
@@ -133,15 +134,29 @@ pub fn keyframe_dynamic(
     (out, added)
 }
 
-/// The points of one keyframe that [`footing`] may make dynamic: static
-/// points in a voxel at its column's ground level (`GroundLevel::at_ground`)
+/// The rows of `session` at their column's ground level
+/// (`GroundLevel::at_ground`), a bit each (`grid::bit_set`): what the
+/// footing step calls ground level, computed once per session.
+pub fn ground_rows(session: &InterestEvidence, ground: &GroundLevel) -> Vec<u64> {
+    let keys = session.keys();
+    (0..keys.len().div_ceil(64))
+        .into_par_iter()
+        .map(|w| {
+            let rows = w * 64..(w * 64 + 64).min(keys.len());
+            rows.filter(|&i| ground.at_ground(&unpack(keys[i]).0) == Some(true)).fold(0u64, |b, i| b | 1 << (i % 64))
+        })
+        .collect()
+}
+
+/// The points of one keyframe that the footing step may make dynamic:
+/// static points in a ground-level voxel (`ground_rows`, [`ground_rows`])
 /// with a 26-neighbouring voxel (or its own) holding a dynamic point of the
 /// same keyframe: `(point index, row)`, ascending.
 pub fn footing_candidates(
     rows_of: &[Option<usize>],
     session: &InterestEvidence,
     verdicts: &[bool],
-    ground: &GroundLevel,
+    ground_rows: &[u64],
 ) -> Vec<(u32, u32)> {
     let keys = session.keys();
     // The dynamic voxels and their 26 neighbours (a keyframe's movers are a
@@ -159,7 +174,7 @@ pub fn footing_candidates(
     let mut out = Vec::new();
     for (j, (r, &d)) in rows_of.iter().zip(verdicts).enumerate() {
         let Some(r) = *r else { continue };
-        if !d && near_dynamic.contains(&r) && ground.at_ground(&unpack(keys[r]).0) == Some(true) {
+        if !d && near_dynamic.contains(&r) && bit_set(ground_rows, r) {
             out.push((j as u32, r as u32));
         }
     }
@@ -263,13 +278,14 @@ mod tests {
         keys.push([1, 0, 1]);
         let pts = rows(&session, &keys);
         let verdicts: Vec<bool> = keys.iter().map(|k| *k == [1, 0, 1]).collect();
-        let got = footing_candidates(&pts, &session, &verdicts, &ground);
+        let at_ground = ground_rows(&session, &ground);
+        let got = footing_candidates(&pts, &session, &verdicts, &at_ground);
         // The ground at x = 0..=2 and [2,0,1] touch [1,0,1]; x = 3 is two
         // columns off; [0,0,2] touches it but lies above the band; the
         // dynamic points are no candidates.
         let row = |k: [i32; 3]| session.find(pack(VoxelKey(k)).unwrap()).unwrap() as u32;
         assert_eq!(got, vec![(0, row([0, 0, 0])), (1, row([1, 0, 0])), (2, row([2, 0, 0])), (5, row([2, 0, 1]))]);
-        assert!(footing_candidates(&pts, &session, &vec![false; keys.len()], &ground).is_empty());
+        assert!(footing_candidates(&pts, &session, &vec![false; keys.len()], &at_ground).is_empty());
     }
 
     #[test]

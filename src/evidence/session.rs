@@ -27,7 +27,7 @@ use super::grid::{
     Box3, InterestEvidence, RayStats, Row, add_points_by_row, bit_set, pack, packed_key, row_of, unpack,
 };
 use super::ground::GroundLevel;
-use super::grow::{footing_candidates, keyframe_dynamic, stands_on_ground};
+use super::grow::{footing_candidates, ground_rows, keyframe_dynamic, stands_on_ground};
 use super::no_return::{NoReturn, NoReturnImage};
 use super::raycast::voxel_key;
 use super::stats::{EvidenceConfig, FreeTest};
@@ -372,21 +372,8 @@ fn label_points(
     dynamic: &[bool],
     cfg: &EvidenceConfig,
 ) -> (PointLabels, usize) {
-    let footing_on = cfg.footing_height_m > 0.0 && session.ground().is_some();
-    // The rows at ground level, a bit each: one test per point below.
-    let ground_rows: Vec<u64> = match session.ground() {
-        Some(g) if footing_on => {
-            let keys = session.keys();
-            (0..keys.len().div_ceil(64))
-                .into_par_iter()
-                .map(|w| {
-                    let rows = w * 64..(w * 64 + 64).min(keys.len());
-                    rows.filter(|&i| g.at_ground(&unpack(keys[i]).0) == Some(true)).fold(0u64, |b, i| b | 1 << (i % 64))
-                })
-                .collect()
-        }
-        _ => Vec::new(),
-    };
+    // The footing step's ground level, a bit per row; `None`: the step is off.
+    let at_ground = session.ground().filter(|_| cfg.footing_height_m > 0.0).map(|g| ground_rows(session, g));
     let mut parts: Vec<KeyframeLabels> = keyframes
         .par_iter()
         .map(|kf| {
@@ -395,10 +382,10 @@ fn label_points(
             let rows: Vec<Option<usize>> = world_points(kf).iter().map(|p| row_at(session, p)).collect();
             let (verdicts, grown) = keyframe_dynamic(&rows, session, dynamic, session.ground(), cfg);
             let (mut feet, mut band) = (Vec::new(), Vec::new());
-            if let (true, Some(g)) = (footing_on, session.ground()) {
-                feet = footing_candidates(&rows, session, &verdicts, g);
+            if let Some(at_ground) = &at_ground {
+                feet = footing_candidates(&rows, session, &verdicts, at_ground);
                 band = (rows.iter().enumerate())
-                    .filter_map(|(j, r)| r.filter(|&r| bit_set(&ground_rows, r)).map(|r| (j as u32, r as u32)))
+                    .filter_map(|(j, r)| r.filter(|&r| bit_set(at_ground, r)).map(|r| (j as u32, r as u32)))
                     .collect();
             }
             let labels = PointLabels {
@@ -410,10 +397,7 @@ fn label_points(
             KeyframeLabels { labels, grown, feet, band }
         })
         .collect();
-    let grown_feet = match session.ground() {
-        Some(g) if footing_on => footing(keyframes, session, g, &mut parts, cfg),
-        _ => 0,
-    };
+    let grown_feet = at_ground.map_or(0, |at_ground| footing(keyframes, session, &at_ground, &mut parts, cfg));
     let mut out = PointLabels::default();
     let mut grown = grown_feet;
     for KeyframeLabels { labels: p, grown: g, .. } in parts {
@@ -445,7 +429,7 @@ struct KeyframeLabels {
 fn footing(
     keyframes: &[KeyframeInput<'_>],
     session: &InterestEvidence,
-    ground: &GroundLevel,
+    at_ground: &[u64],
     parts: &mut [KeyframeLabels],
     cfg: &EvidenceConfig,
 ) -> usize {
@@ -461,9 +445,9 @@ fn footing(
     for &(_, r) in parts.iter().flat_map(|p| &p.feet) {
         let k = unpack(keys[r as usize]).0;
         for dz in -1..=1 {
-            let n = [k[0], k[1], k[2] + dz];
-            if ground.at_ground(&n) == Some(true)
-                && let Some(i) = pack(VoxelKey(n)).and_then(|n| session.find(n))
+            let n = VoxelKey([k[0], k[1], k[2] + dz]);
+            if let Some(i) = pack(n).and_then(|n| session.find(n))
+                && bit_set(at_ground, i)
             {
                 in_band[i / 64] |= 1 << (i % 64);
                 any = true;
