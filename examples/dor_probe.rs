@@ -5,6 +5,9 @@
 //! cargo run --release --example dor_probe -- SESSION_DIR [--set key=value ...] [--submap-kf 20]
 //! ```
 //!
+//! The field of view and beam spacing are the session's, as ingest takes
+//! them (its `session.toml` sensor, else estimated from the first scan).
+//!
 //! Poses: `gt/poses.txt` when the folder has one (a simulated session's true
 //! poses), else the layout's own (SemanticKITTI's). `--poses FILE` (KITTI
 //! format, one line per keyframe, e.g. what `seam poses` writes) replaces
@@ -114,7 +117,14 @@ fn run() -> Result<(), String> {
             })
             .collect();
         let t = Instant::now();
-        let out = generate(&inputs, &[], None, &cfg, |_| {});
+        // The session's field of view and beam spacing, as ingest takes them.
+        let fov = src
+            .meta
+            .fov
+            .unwrap_or_else(|| seam::registration::dop::estimate_fov(scans.first().map_or(&[][..], |s| &s[..])));
+        let spacing = src.meta.sensor_model.and_then(seam::sensor::SensorModel::beam_spacing_deg);
+        let cfg = cfg.for_beam_spacing(spacing).into_owned();
+        let out = generate(&inputs, &[], Some(&fov), &cfg, |_| {});
         let secs = t.elapsed().as_secs_f64();
         let mut acc = DorAccumulator::new(0.2);
         let mut row = 0;

@@ -300,6 +300,12 @@ fn bad_evidence_settings_and_dor_inputs() {
     std::fs::write(&footing, "[evidence]\nfooting_height_m = -0.05\n").unwrap();
     let footing_kf = t.path().join("footing_kf.toml");
     std::fs::write(&footing_kf, "[evidence]\nfooting_max_keyframes = 0\n").unwrap();
+    let own_range = t.path().join("own_range.toml");
+    std::fs::write(&own_range, "[evidence]\nown_no_return_range_m = -60\n").unwrap();
+    let own_elev = t.path().join("own_elev.toml");
+    std::fs::write(&own_elev, "[evidence]\nown_no_return_min_elevation_deg = 91\n").unwrap();
+    let own_kf = t.path().join("own_kf.toml");
+    std::fs::write(&own_kf, "[evidence]\nown_no_return_max_keyframes = 0\n").unwrap();
     for (cfg, fragment) in [
         (&model, "octomap"),
         (&clearance, "free_clearance_m"),
@@ -318,6 +324,9 @@ fn bad_evidence_settings_and_dor_inputs() {
         (&grow_hits, "grow_max_hits"),
         (&footing, "footing_height_m"),
         (&footing_kf, "footing_max_keyframes"),
+        (&own_range, "own_no_return_range_m"),
+        (&own_elev, "own_no_return_min_elevation_deg"),
+        (&own_kf, "own_no_return_max_keyframes"),
     ] {
         let o = run(&["--config", cfg.to_str().unwrap(), "ingest", st, dir]);
         assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));

@@ -986,8 +986,10 @@ pub struct RayStats {
     pub skipped_rays: usize,
     pub hit_voxels: usize,
     pub free_voxels: usize,
-    /// Voxels freed by beams that returned nothing ([`super::no_return`]).
+    /// Map voxels freed by beams that returned nothing ([`super::no_return`]).
     pub no_return_voxels: usize,
+    /// The session's own voxels freed that way (the tests with clear cells).
+    pub own_no_return_voxels: usize,
 }
 
 impl std::ops::AddAssign for RayStats {
@@ -997,6 +999,7 @@ impl std::ops::AddAssign for RayStats {
         self.hit_voxels += o.hit_voxels;
         self.free_voxels += o.free_voxels;
         self.no_return_voxels += o.no_return_voxels;
+        self.own_no_return_voxels += o.own_no_return_voxels;
     }
 }
 
@@ -1152,12 +1155,13 @@ impl InterestEvidence {
         cfg: &EvidenceConfig,
         shapes: Option<&SurfaceShapes>,
     ) -> RayStats {
-        self.add_keyframe_seeing(origin_m, points_m, keyframe, cfg, shapes, None)
+        self.add_keyframe_seeing(origin_m, points_m, keyframe, cfg, shapes, &[])
     }
 
     /// [`Self::add_keyframe`], and with `no_return` the candidate voxels the
     /// keyframe's beams that returned nothing pass through are freed too
-    /// (once per keyframe, whatever else freed them).
+    /// (once per keyframe, whatever else freed them). The tests' candidate
+    /// sets must be disjoint.
     pub fn add_keyframe_seeing(
         &mut self,
         origin_m: &[f64; 3],
@@ -1165,7 +1169,7 @@ impl InterestEvidence {
         keyframe: u32,
         cfg: &EvidenceConfig,
         shapes: Option<&SurfaceShapes>,
-        no_return: Option<&NoReturn<'_>>,
+        no_return: &[NoReturn<'_>],
     ) -> RayStats {
         let v = self.voxel_m;
         let mut out = RayStats { rays: points_m.len(), ..Default::default() };
@@ -1173,7 +1177,15 @@ impl InterestEvidence {
             out.skipped_rays = points_m.len();
             return out;
         };
-        let sky = no_return.map(|nr| self.no_return_rows(origin_m, nr)).unwrap_or_default();
+        let mut sky = Vec::new();
+        for nr in no_return {
+            let rows = self.no_return_rows(origin_m, nr);
+            if nr.clear_cells.is_some() {
+                out.own_no_return_voxels += rows.len();
+            }
+            sky.extend(rows);
+        }
+        sky.sort_unstable();
         let mut sky_bits = vec![0u64; if sky.is_empty() { 0 } else { self.rows.len().div_ceil(64) }];
         for &i in &sky {
             sky_bits[i as usize / 64] |= 1 << (i % 64);
@@ -1221,12 +1233,13 @@ impl InterestEvidence {
         }
         out.skipped_rays = points_m.len() - cast;
         self.add_free_rows(&sky, origin_m, keyframe, cfg);
-        out.no_return_voxels = sky.len();
+        out.no_return_voxels = sky.len() - out.own_no_return_voxels;
         out
     }
 
     /// Rows of `nr.candidates` within reach whose direction from the sensor
-    /// returned nothing, ascending.
+    /// returned nothing, ascending, without those near the keyframe's points
+    /// when `nr.clear_cells` asks for it.
     fn no_return_rows(&self, origin_m: &[f64; 3], nr: &NoReturn<'_>) -> Vec<u32> {
         let v = self.voxel_m;
         let b = Box3::within_range(origin_m, nr.range_m, v);
@@ -1238,18 +1251,27 @@ impl InterestEvidence {
         let to = nr.candidates.partition_point(|&i| (i as usize) < hi);
         let r_sensor_world = nr.r_world_sensor.inverse();
         let min_sin = nr.min_elevation_deg.to_radians().sin();
-        (from..to)
+        let mut sky: Vec<u32> = (from..to)
             .into_par_iter()
             .with_min_len(1024)
             .filter(|&j| {
                 let (c, r) = ray_to_centre(unpack(self.keys[nr.candidates[j] as usize]), origin_m, v);
-                if !(r > v && r <= nr.range_m.min(nr.candidate_range_m[j] as f64)) || c.z < min_sin * r {
+                let reach = nr.candidate_range_m.get(j).map_or(nr.range_m, |&m| nr.range_m.min(m as f64));
+                if !(r > v && r <= reach) || c.z < min_sin * r {
                     return false;
                 }
                 nr.image.is_empty_around(&(r_sensor_world * c).into())
             })
             .map(|j| nr.candidates[j])
-            .collect()
+            .collect();
+        if let Some((cells, cell)) = nr.clear_cells {
+            sky.retain(|&i| {
+                let c = unpack(self.keys[i as usize]).0.map(|c| c.div_euclid(cell));
+                !(-1..=1)
+                    .any(|dx| (-1..=1).any(|dy| (-1..=1).any(|dz| cells.contains(&[c[0] + dx, c[1] + dy, c[2] + dz]))))
+            });
+        }
+        sky
     }
 
     /// Eq. 4's free evidence of one keyframe on the given rows.

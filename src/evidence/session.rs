@@ -37,8 +37,8 @@ use crate::geometry::{Pose, VoxelKey, rotate_sym, rotation_rows, transformed, tr
 use crate::sensor::Fov;
 use nalgebra::Point3;
 use rayon::prelude::*;
-use rustc_hash::FxHashMap;
-use std::sync::atomic::{AtomicU64, Ordering};
+use rustc_hash::{FxHashMap, FxHashSet};
+use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 use std::time::Instant;
 
 /// One keyframe going into [`generate`].
@@ -73,6 +73,8 @@ pub struct GenerationStats {
     pub skipped_rays: usize,
     /// Map voxels freed by beams that returned nothing, summed over keyframes.
     pub no_return_voxels: usize,
+    /// This session's own voxels freed that way (`own_no_return_*`).
+    pub own_no_return_voxels: usize,
     /// Voxels of interest (occupied by this session's points or given).
     pub interest_voxels: usize,
     /// Voxels with stored evidence, summed over submaps.
@@ -131,6 +133,16 @@ pub fn generate(
             (keys, Box3::of_rays(&origin(kf), &pts, v))
         })
         .collect();
+    // Per keyframe, the cells of `own_no_return_clear_m` its points fall in.
+    let own_cell = ((cfg.own_no_return_clear_m / v).round() as i32).max(1);
+    let own_clear: Vec<FxHashSet<[i32; 3]>> = if fov.is_some() && cfg.own_no_return_range_m > 0.0 {
+        per_kf
+            .par_iter()
+            .map(|(k, _)| k.iter().map(|&k| unpack(k).0.map(|c| c.div_euclid(own_cell))).collect())
+            .collect()
+    } else {
+        Vec::new()
+    };
     let no_return_fov = fov.filter(|_| cfg.no_return_range_m > 0.0 && !map.is_empty());
     // Per submap, the box of its rays (and of the map voxels its no-return
     // beams may free), and the slab of x its points span (packed keys sort
@@ -202,6 +214,11 @@ pub fn generate(
     } else {
         Vec::new()
     };
+    // This session's own voxels that at most `own_no_return_max_keyframes`
+    // keyframes put a point in: the ones its beams that returned nothing may
+    // free (`evidence::no_return`, within a session).
+    let own_fov = fov.filter(|_| cfg.own_no_return_range_m > 0.0);
+    let own_candidate = if own_fov.is_some() { few_keyframes_rows(&session, &per_kf, cfg) } else { Vec::new() };
     drop(per_kf);
     let level_above_m = keyframes.iter().map(|k| k.t_world_keyframe.translation.vector.z).fold(f64::INFINITY, f64::min)
         + super::grid::CLEARANCE_MIN_DROP_M;
@@ -229,24 +246,50 @@ pub fn generate(
                 .filter(|&(_, r)| r > 0.0)
                 .unzip()
         };
+        let own: Vec<u32> = if own_candidate.is_empty() {
+            Vec::new()
+        } else {
+            (0..idx.len() as u32).filter(|&j| bit_set(&own_candidate, idx[j as usize] as usize)).collect()
+        };
         let mut rays = RayStats::default();
-        for kf in keyframes.iter().filter(|k| k.submap == s) {
+        for (kf_ordinal, kf) in keyframes.iter().enumerate().filter(|(_, k)| k.submap == s) {
             world_points_into(kf, &mut pts);
-            let image = no_return_fov.and_then(|f| NoReturnImage::build(kf.points, f, cfg.no_return_margin_deg));
-            let no_return = image.as_ref().map(|image| NoReturn {
-                image,
-                r_world_sensor: kf.t_world_keyframe.rotation,
-                candidates: &candidates,
-                candidate_range_m: &candidate_range_m,
-                range_m: cfg.no_return_range_m,
-                min_elevation_deg: cfg.no_return_min_elevation_deg,
+            let image = no_return_fov.or(own_fov.filter(|_| !own.is_empty())).and_then(|f| {
+                NoReturnImage::build_above(kf.points, f, cfg.no_return_margin_deg, image_floor_deg(kf, cfg))
             });
-            rays += sub.add_keyframe_seeing(&origin(kf), &pts, kf.index, cfg, shapes.as_ref(), no_return.as_ref());
+            let mut no_return = Vec::with_capacity(2);
+            if let Some(image) = &image {
+                let r_world_sensor = kf.t_world_keyframe.rotation;
+                if no_return_fov.is_some() {
+                    no_return.push(NoReturn {
+                        image,
+                        r_world_sensor,
+                        candidates: &candidates,
+                        candidate_range_m: &candidate_range_m,
+                        range_m: cfg.no_return_range_m,
+                        min_elevation_deg: cfg.no_return_min_elevation_deg,
+                        clear_cells: None,
+                    });
+                }
+                if own_fov.is_some() {
+                    no_return.push(NoReturn {
+                        image,
+                        r_world_sensor,
+                        candidates: &own,
+                        candidate_range_m: &[],
+                        range_m: cfg.own_no_return_range_m,
+                        min_elevation_deg: cfg.own_no_return_min_elevation_deg,
+                        clear_cells: Some((&own_clear[kf_ordinal], own_cell)),
+                    });
+                }
+            }
+            rays += sub.add_keyframe_seeing(&origin(kf), &pts, kf.index, cfg, shapes.as_ref(), &no_return);
             done += 1;
             progress(done);
         }
         stats.skipped_rays += rays.skipped_rays;
         stats.no_return_voxels += rays.no_return_voxels;
+        stats.own_no_return_voxels += rays.own_no_return_voxels;
         let mut boxes = hit_boxes(&sub, keyframes.iter().filter(|k| k.submap == s));
         for b in &mut boxes {
             if b[0] > b[3] {
@@ -285,6 +328,39 @@ pub fn generate(
     stats.cleaned_voxels = cleaned.iter().map(CleanedMap::len).sum();
     stats.total_s = started.elapsed().as_secs_f64();
     SessionEvidence { submaps, cleaned, labels, stats }
+}
+
+/// The sensor-frame elevation below which a keyframe's no-return image
+/// needs no returns: the lowest world elevation either test looks at, less
+/// the sensor's tilt, twice the widest margin and a degree.
+fn image_floor_deg(kf: &KeyframeInput<'_>, cfg: &EvidenceConfig) -> f64 {
+    let up = kf.t_world_keyframe.rotation * nalgebra::Vector3::z();
+    let tilt_deg = up.z.clamp(-1.0, 1.0).acos().to_degrees();
+    let lowest = if cfg.own_no_return_range_m > 0.0 {
+        cfg.no_return_min_elevation_deg.min(cfg.own_no_return_min_elevation_deg)
+    } else {
+        cfg.no_return_min_elevation_deg
+    };
+    lowest - tilt_deg - 2.0 * super::no_return::FORWARD_MARGIN_FACTOR * cfg.no_return_margin_deg - 1.0
+}
+
+/// One bit per row of `session`: set where at least one and at most
+/// `cfg.own_no_return_max_keyframes` keyframes' point keys (`per_kf`) hold it.
+fn few_keyframes_rows(session: &InterestEvidence, per_kf: &[(Vec<u64>, Box3)], cfg: &EvidenceConfig) -> Vec<u64> {
+    let counts: Vec<AtomicU32> = (0..session.len()).map(|_| AtomicU32::new(0)).collect();
+    per_kf.par_iter().flat_map_iter(|(k, _)| k.iter()).for_each(|&k| {
+        if let Some(i) = session.find(k) {
+            counts[i].fetch_add(1, Ordering::Relaxed);
+        }
+    });
+    let max = cfg.own_no_return_max_keyframes;
+    let mut bits = vec![0u64; session.len().div_ceil(64)];
+    for (i, c) in counts.into_iter().enumerate() {
+        if (1..=max).contains(&c.into_inner()) {
+            bits[i / 64] |= 1 << (i % 64);
+        }
+    }
+    bits
 }
 
 /// One bit per row of `session`: set where some keyframe's point keys
@@ -1016,6 +1092,88 @@ mod tests {
             }
         }
         out
+    }
+
+    /// A truck crossing the view 44 m out, seen against the sky, on ground
+    /// between two of the sensor's rings (41 and 58 m): once it has driven
+    /// on, the beams where it was return nothing, and no ray with an
+    /// endpoint crosses its upper half. (Where a ring lies within the
+    /// clearance below it, the ground's points keep it, as they do a
+    /// structure.) Beams that returned nothing free
+    /// it within the session; with them off it stays. A sign post a few
+    /// beams catch in one keyframe only, 1.5 m beside a billboard, stays
+    /// with the default clearance (the other keyframes see the billboard
+    /// beside it) and goes without it; the billboard (seen by every
+    /// keyframe) and the ground stay.
+    #[test]
+    fn a_truck_seen_against_the_sky_is_freed_by_beams_that_returned_nothing() {
+        let n = 4;
+        let poses: Vec<Pose> = (0..n)
+            .map(|i| Pose::from_parts(Translation3::new(0.5 * i as f64, 0.0, 1.8), UnitQuaternion::identity()))
+            .collect();
+        let truck_at = |i: usize| {
+            let y = -10.0 + 8.0 * i as f64;
+            ([44.0, y, 0.5], [46.5, y + 5.0, 3.5])
+        };
+        let billboard = ([30.0, 20.0, 3.0], [30.4, 24.0, 5.0]);
+        let post = ([30.0, 25.5, 3.0], [30.4, 25.9, 5.0]);
+        let scans: Vec<Vec<[f32; 3]>> = (0..n)
+            .map(|i| {
+                let o: [f64; 3] = poses[i].translation.vector.into();
+                let mut boxes = vec![truck_at(i), billboard];
+                if i == 0 {
+                    boxes.push(post);
+                }
+                spin_scan(o, 720, 60.0, &boxes)
+            })
+            .collect();
+        let inputs = inputs_of(&scans, &poses, usize::MAX);
+        let band = Fov::Band { elev_min_deg: -22.5, elev_max_deg: 22.5 };
+        let inside =
+            |b: ([f64; 3], [f64; 3]), p: [f64; 3]| (0..3).all(|a| p[a] >= b.0[a] - 1e-3 && p[a] <= b.1[a] + 1e-3);
+        // Removed / total of the first keyframe's points on the truck above
+        // the sensor, on the post; and every keyframe's removed static points.
+        let run = |cfg: &EvidenceConfig| {
+            let out = generate(&inputs, &[], Some(&band), cfg, |_| {});
+            let (mut upper, mut on_post, mut static_gone) = ((0, 0), (0, 0), (0, 0));
+            let mut row = 0;
+            for (i, scan) in scans.iter().enumerate() {
+                let o: [f64; 3] = poses[i].translation.vector.into();
+                for p in scan {
+                    let w = [p[0] as f64 + o[0], p[1] as f64 + o[1], p[2] as f64 + o[2]];
+                    let gone = out.labels.dynamic[row] as usize;
+                    row += 1;
+                    if inside(truck_at(i), w) {
+                        if i == 0 && w[2] > 1.8 {
+                            upper = (upper.0 + gone, upper.1 + 1);
+                        }
+                    } else if inside(post, w) {
+                        on_post = (on_post.0 + gone, on_post.1 + 1);
+                    } else {
+                        static_gone = (static_gone.0 + gone, static_gone.1 + 1);
+                    }
+                }
+            }
+            assert!(upper.1 >= 20 && on_post.1 >= 5, "the truck and the post have points: {upper:?} {on_post:?}");
+            let share = |c: (usize, usize)| c.0 as f64 / c.1 as f64;
+            (share(upper), share(on_post), static_gone, out.stats.own_no_return_voxels)
+        };
+        let cfg = EvidenceConfig::default();
+        let (upper, post_gone, static_gone, freed) = run(&cfg);
+        assert!(upper > 0.8, "defaults: {upper:.2} of the truck's upper half removed");
+        assert!(freed > 0);
+        assert_eq!(post_gone, 0.0, "the post beside the billboard stays");
+        assert_eq!(static_gone.0, 0, "{static_gone:?} static points removed");
+        let off = EvidenceConfig { own_no_return_range_m: 0.0, ..cfg.clone() };
+        let (upper_off, _, _, freed_off) = run(&off);
+        assert!(upper_off < 0.2, "no ray frees the truck's upper half: {upper_off:.2} removed");
+        assert_eq!(freed_off, 0);
+        let near = EvidenceConfig { own_no_return_range_m: 35.0, ..cfg.clone() };
+        assert!(run(&near).0 < 0.2, "the truck lies beyond 35 m");
+        let unguarded = EvidenceConfig { own_no_return_clear_m: 0.0, ..cfg.clone() };
+        let (_, post_unguarded, billboard, _) = run(&unguarded);
+        assert!(post_unguarded > 0.5, "without the clearance the post goes: {post_unguarded:.2}");
+        assert_eq!(billboard.0, 0, "the billboard, seen by every keyframe, stays");
     }
 
     /// A car driving ahead along the sensor's beams, a little faster than

@@ -322,6 +322,24 @@ pub struct EvidenceConfig {
     /// below it, dark and grazing ground past the sensor's reach returns
     /// nothing too.
     pub no_return_min_elevation_deg: f64,
+    /// Beams that returned nothing also free this session's own voxels
+    /// (`evidence::no_return`, "within a session"): a mover seen against
+    /// the sky or against ground the sparse rings never reach leaves no
+    /// ray with an endpoint behind it once it has gone. Only within this
+    /// range of the sensor; 0 disables. The other `own_no_return_*` keys
+    /// guard the static map.
+    pub own_no_return_range_m: f64,
+    /// ... only directions at least this far above the horizontal (world),
+    /// degrees: not the ground below the sensor.
+    pub own_no_return_min_elevation_deg: f64,
+    /// ... only with none of the keyframe's own points within about this
+    /// distance (cells of this size, the voxel's and its 26 neighbours): a
+    /// fence or scaffold a few beams missed is still seen beside it. At
+    /// most a voxel: never the voxel or its neighbours.
+    pub own_no_return_clear_m: f64,
+    /// ... only voxels at most this many keyframes put a point in: what
+    /// many keyframes saw is there.
+    pub own_no_return_max_keyframes: u32,
     /// Which per-voxel model turns rays into ε_l: seam's directional
     /// evidence, or the scalar log-odds baseline for the ablation.
     pub model: EvidenceModel,
@@ -475,6 +493,10 @@ impl Default for EvidenceConfig {
             no_return_reach_factor: 1.25,
             no_return_margin_deg: 1.5,
             no_return_min_elevation_deg: 3.0,
+            own_no_return_range_m: 60.0,
+            own_no_return_min_elevation_deg: -1.0,
+            own_no_return_clear_m: 2.0,
+            own_no_return_max_keyframes: 2,
             model: EvidenceModel::Directional,
             log_odds: LogOddsConfig::default(),
         }
@@ -504,6 +526,8 @@ impl EvidenceConfig {
             ("no_return_clear_m", self.no_return_clear_m),
             ("no_return_reach_factor", self.no_return_reach_factor),
             ("footing_height_m", self.footing_height_m),
+            ("own_no_return_range_m", self.own_no_return_range_m),
+            ("own_no_return_clear_m", self.own_no_return_clear_m),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(format!("evidence.{name} is {v}; it must be zero or a positive number"));
@@ -537,6 +561,17 @@ impl EvidenceConfig {
                 "evidence.no_return_min_elevation_deg is {}; it must lie in [-90, 90] (default 3)",
                 self.no_return_min_elevation_deg
             ));
+        }
+        if !(-90.0..=90.0).contains(&self.own_no_return_min_elevation_deg) {
+            return Err(format!(
+                "evidence.own_no_return_min_elevation_deg is {}; it must lie in [-90, 90] (default -1)",
+                self.own_no_return_min_elevation_deg
+            ));
+        }
+        if self.own_no_return_max_keyframes == 0 {
+            return Err("evidence.own_no_return_max_keyframes is 0; it must be at least 1 \
+                        (default 2; own_no_return_range_m = 0 turns the step off)"
+                .into());
         }
         if !(0.0..=1.0).contains(&self.omega_floor) {
             return Err(format!("evidence.omega_floor is {}; it must lie in [0, 1] (default 0.2)", self.omega_floor));

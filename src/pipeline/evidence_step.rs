@@ -187,6 +187,7 @@ pub(super) fn evidence(ctx: &mut StepCtx<'_>, step: &'static str, seq: i64) -> R
         "cleaned_voxels": st.cleaned_voxels,
         "skipped_rays": st.skipped_rays,
         "no_return_voxels": st.no_return_voxels,
+        "own_no_return_voxels": st.own_no_return_voxels,
         "raycast_s": st.raycast_s,
         "generate_s": st.total_s,
         "reprojected_rows": reprojected_rows,
