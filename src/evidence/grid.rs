@@ -750,8 +750,10 @@ pub struct Row {
     pub free_m: [f32; 6],
     pub owner_keyframe: u32,
     pub owner_q: f32,
-    /// Keyframes whose beams that returned nothing freed it (counted in
-    /// `free_n` too; [`super::no_return`]).
+    /// Keyframes whose beams that returned nothing freed it as a map voxel
+    /// this session's points do not occupy (counted in `free_n` too;
+    /// [`super::no_return`]); the session's own voxels freed that way are
+    /// counted in `free_n` only.
     pub no_return_n: u32,
 }
 
@@ -1177,17 +1179,23 @@ impl InterestEvidence {
             out.skipped_rays = points_m.len();
             return out;
         };
-        let mut sky = Vec::new();
+        // Map voxels freed this way count in `no_return_n` (change
+        // detection's full-weight support); the session's own do not.
+        let (mut sky, mut own_sky) = (Vec::new(), Vec::new());
         for nr in no_return {
             let rows = self.no_return_rows(origin_m, nr);
             if nr.clear_cells.is_some() {
-                out.own_no_return_voxels += rows.len();
+                own_sky.extend(rows);
+            } else {
+                sky.extend(rows);
             }
-            sky.extend(rows);
         }
+        out.own_no_return_voxels = own_sky.len();
         sky.sort_unstable();
-        let mut sky_bits = vec![0u64; if sky.is_empty() { 0 } else { self.rows.len().div_ceil(64) }];
-        for &i in &sky {
+        own_sky.sort_unstable();
+        let none = sky.is_empty() && own_sky.is_empty();
+        let mut sky_bits = vec![0u64; if none { 0 } else { self.rows.len().div_ceil(64) }];
+        for &i in sky.iter().chain(&own_sky) {
             sky_bits[i as usize / 64] |= 1 << (i % 64);
         }
         let b = Box3::of_rays(origin_m, points_m, v).intersect(&self.bounds).limit(o_key.0, DENSE_MAX_VOXELS);
@@ -1232,8 +1240,9 @@ impl InterestEvidence {
             out.free_voxels = f;
         }
         out.skipped_rays = points_m.len() - cast;
-        self.add_free_rows(&sky, origin_m, keyframe, cfg);
-        out.no_return_voxels = sky.len() - out.own_no_return_voxels;
+        self.add_free_rows(&sky, origin_m, keyframe, cfg, true);
+        self.add_free_rows(&own_sky, origin_m, keyframe, cfg, false);
+        out.no_return_voxels = sky.len();
         out
     }
 
@@ -1275,14 +1284,14 @@ impl InterestEvidence {
     }
 
     /// Eq. 4's free evidence of one keyframe on the given rows.
-    fn add_free_rows(&mut self, rows: &[u32], origin_m: &[f64; 3], keyframe: u32, cfg: &EvidenceConfig) {
+    fn add_free_rows(&mut self, rows: &[u32], origin_m: &[f64; 3], keyframe: u32, cfg: &EvidenceConfig, map: bool) {
         let v = self.voxel_m;
         let (_, l_miss, l_min, l_max) = cfg.log_odds.log_odds();
         for &i in rows {
             let (u, q) = direction_and_weight(ray_to_centre(unpack(self.keys[i as usize]), origin_m, v), cfg);
             let row = &mut self.rows[i as usize];
             Row::add(&mut row.free_n, &mut row.free_q, &mut row.free_m, q, u);
-            row.no_return_n += 1;
+            row.no_return_n += u32::from(map);
             row.offer_owner(keyframe, q);
             let l = &mut self.log_odds[i as usize];
             *l = (*l + l_miss).clamp(l_min, l_max);

@@ -1094,13 +1094,20 @@ mod tests {
         out
     }
 
+    /// `n` poses 1.8 m up, 0.5 m apart along x, level.
+    fn stepping_along_x(n: usize) -> Vec<Pose> {
+        (0..n)
+            .map(|i| Pose::from_parts(Translation3::new(0.5 * i as f64, 0.0, 1.8), UnitQuaternion::identity()))
+            .collect()
+    }
+
     /// A truck crossing the view 44 m out, seen against the sky, on ground
     /// between two of the sensor's rings (41 and 58 m): once it has driven
     /// on, the beams where it was return nothing, and no ray with an
     /// endpoint crosses its upper half. (Where a ring lies within the
     /// clearance below it, the ground's points keep it, as they do a
-    /// structure.) Beams that returned nothing free
-    /// it within the session; with them off it stays. A sign post a few
+    /// structure.) Beams that returned nothing free it within the session;
+    /// with them off it stays. A sign post a few
     /// beams catch in one keyframe only, 1.5 m beside a billboard, stays
     /// with the default clearance (the other keyframes see the billboard
     /// beside it) and goes without it; the billboard (seen by every
@@ -1108,9 +1115,7 @@ mod tests {
     #[test]
     fn a_truck_seen_against_the_sky_is_freed_by_beams_that_returned_nothing() {
         let n = 4;
-        let poses: Vec<Pose> = (0..n)
-            .map(|i| Pose::from_parts(Translation3::new(0.5 * i as f64, 0.0, 1.8), UnitQuaternion::identity()))
-            .collect();
+        let poses = stepping_along_x(n);
         let truck_at = |i: usize| {
             let y = -10.0 + 8.0 * i as f64;
             ([44.0, y, 0.5], [46.5, y + 5.0, 3.5])
@@ -1251,9 +1256,7 @@ mod tests {
     #[test]
     fn a_walking_persons_feet_go_with_the_footing_step() {
         let n = 8;
-        let poses: Vec<Pose> = (0..n)
-            .map(|i| Pose::from_parts(Translation3::new(0.5 * i as f64, 0.0, 1.8), UnitQuaternion::identity()))
-            .collect();
+        let poses = stepping_along_x(n);
         let person_at = |i: usize| {
             let y = -3.0 + 0.8 * i as f64;
             ([8.0, y, 0.0], [8.4, y + 0.4, 1.7])
