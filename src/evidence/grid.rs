@@ -1005,12 +1005,44 @@ impl std::ops::AddAssign for RayStats {
     }
 }
 
+/// The sorted union of sorted, deduplicated runs (two-way merges, halves in
+/// parallel).
+fn merge_sorted_runs(runs: &[&[u64]]) -> Vec<u64> {
+    match runs {
+        [] => Vec::new(),
+        [one] => one.to_vec(),
+        _ => {
+            let (a, b) = runs.split_at(runs.len() / 2);
+            let (a, b) = rayon::join(|| merge_sorted_runs(a), || merge_sorted_runs(b));
+            let mut out = Vec::with_capacity(a.len() + b.len());
+            let (mut i, mut j) = (0, 0);
+            while i < a.len() && j < b.len() {
+                let (x, y) = (a[i], b[j]);
+                out.push(x.min(y));
+                i += usize::from(x <= y);
+                j += usize::from(y <= x);
+            }
+            out.extend_from_slice(&a[i..]);
+            out.extend_from_slice(&b[j..]);
+            out
+        }
+    }
+}
+
 impl InterestEvidence {
     /// Empty evidence on `keys` (packed; sorted and deduplicated here).
     pub fn new(mut keys: Vec<u64>, voxel_m: f64) -> InterestEvidence {
         keys.par_sort_unstable();
         keys.dedup();
         Self::on_sorted(keys, voxel_m)
+    }
+
+    /// Empty evidence on the union of `runs`, each sorted and deduplicated
+    /// (a keyframe's keys): merged pairwise in parallel, in about a tenth of
+    /// what sorting their concatenation costs.
+    pub fn from_sorted_runs(runs: &[&[u64]], voxel_m: f64) -> InterestEvidence {
+        debug_assert!(runs.iter().all(|r| r.windows(2).all(|w| w[0] < w[1])), "runs sorted and deduplicated");
+        Self::on_sorted(merge_sorted_runs(runs), voxel_m)
     }
 
     /// Evidence summed from parts of `(key, row)` pairs in any key order.
@@ -1382,6 +1414,29 @@ mod tests {
     use super::*;
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
+
+    #[test]
+    fn merged_runs_are_the_sorted_union() {
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        for n_runs in [0usize, 1, 2, 3, 10] {
+            let runs: Vec<Vec<u64>> = (0..n_runs)
+                .map(|r| {
+                    // Runs of different lengths, overlapping in part.
+                    let mut k: Vec<u64> = (0..rng.random_range(0..2_000)).map(|_| rng.random_range(0..5_000)).collect();
+                    k.push(r as u64 * 1_000);
+                    k.sort_unstable();
+                    k.dedup();
+                    k
+                })
+                .collect();
+            let refs: Vec<&[u64]> = runs.iter().map(|r| &r[..]).collect();
+            let mut want: Vec<u64> = runs.concat();
+            want.sort_unstable();
+            want.dedup();
+            assert_eq!(merge_sorted_runs(&refs), want, "{n_runs} runs");
+            assert_eq!(InterestEvidence::from_sorted_runs(&refs, 0.2).keys(), &want[..]);
+        }
+    }
 
     /// Every row gets its points in keyframe order and, within a keyframe,
     /// in point order, with the keyframe's ordinal: what one thread adding

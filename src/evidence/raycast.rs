@@ -219,13 +219,11 @@ impl BlockMask {
 
     #[inline]
     fn index_block(&self, block: &[i32; 3]) -> Option<u64> {
-        let mut c = [0u64; 3];
-        for a in 0..3 {
-            let d = block[a] as i64 - self.lo[a] as i64;
-            if d < 0 || d as u64 >= self.dims[a] {
-                return None;
-            }
-            c[a] = d as u64;
+        // Below `lo` wraps to a huge offset: one unsigned test per axis, and
+        // no branch between the axes.
+        let c = [0, 1, 2].map(|a| (block[a] as i64 - self.lo[a] as i64) as u64);
+        if (c[0] >= self.dims[0]) | (c[1] >= self.dims[1]) | (c[2] >= self.dims[2]) {
+            return None;
         }
         Some((c[2] * self.dims[1] + c[1]) * self.dims[0] + c[0])
     }
