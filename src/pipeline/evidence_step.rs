@@ -43,6 +43,7 @@ pub(super) fn evidence(ctx: &mut StepCtx<'_>, step: &'static str, seq: i64) -> R
     let submaps = store::submaps(ctx.store.conn(), session)?;
     let ordinal: HashMap<SubmapId, usize> = submaps.iter().map(|s| (s.submap_id, s.submap_index as usize)).collect();
     let loader = ScanLoader::new(ctx.store)?;
+    let t_read = Instant::now();
     ctx.progress.begin("read scans", state.keyframes.len() as u64);
     let scans = state
         .keyframes
@@ -54,6 +55,7 @@ pub(super) fn evidence(ctx: &mut StepCtx<'_>, step: &'static str, seq: i64) -> R
         })
         .collect::<Result<Vec<_>, _>>()?;
     ctx.progress.end();
+    let read_s = t_read.elapsed().as_secs_f64();
     let inputs: Vec<KeyframeInput<'_>> = state
         .keyframes
         .iter()
@@ -146,6 +148,7 @@ pub(super) fn evidence(ctx: &mut StepCtx<'_>, step: &'static str, seq: i64) -> R
     // Publish the files, then record them with the step in one transaction.
     // Each file is compressed and synced on one thread, so they are written
     // side by side (the labels, one row per point, take longest).
+    let t_write = Instant::now();
     let by_ordinal: HashMap<usize, SubmapId> = ordinal.iter().map(|(id, o)| (*o, *id)).collect();
     let root = ctx.store.root();
     let s = session.0;
@@ -168,6 +171,7 @@ pub(super) fn evidence(ctx: &mut StepCtx<'_>, step: &'static str, seq: i64) -> R
     let (submap_files, labels_file) = rayon::join(write_submaps, write_labels);
     let mut published = submap_files?;
     published.push(labels_file?);
+    let write_s = t_write.elapsed().as_secs_f64();
 
     let model = match cfg.model {
         EvidenceModel::Directional => "directional",
@@ -194,6 +198,8 @@ pub(super) fn evidence(ctx: &mut StepCtx<'_>, step: &'static str, seq: i64) -> R
         "reprojected_voxels": reprojected_voxels,
         "reprojected_cleaned_points": reprojected_cleaned,
         "reproject_s": reproject_s,
+        "read_s": read_s,
+        "write_s": write_s,
     });
     let root = ctx.store.root().to_path_buf();
     ctx.commit(step, seq, (&started_at, t0), |tx| {

@@ -103,7 +103,9 @@ pub fn write_batch_with(
 
 fn writer_props(schema: &Schema, row_group_rows: usize, key_value: Vec<(String, String)>) -> WriterProperties {
     let mut props = WriterProperties::builder()
-        .set_compression(Compression::ZSTD(ZstdLevel::try_new(3).unwrap_or_default()))
+        // Level 1: on SemanticKITTI 08's evidence step the files are 1-2 %
+        // larger than at 3 and written in 0.09 s instead of 0.11 s (of 0.72).
+        .set_compression(Compression::ZSTD(ZstdLevel::try_new(1).unwrap_or_default()))
         .set_max_row_group_row_count(Some(row_group_rows));
     if !key_value.is_empty() {
         props = props.set_key_value_metadata(Some(
