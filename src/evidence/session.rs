@@ -149,9 +149,6 @@ pub fn generate(
     // by x first).
     let mut submap_box = vec![Box3::EMPTY; n_submaps];
     let mut points_x = vec![Box3::EMPTY; n_submaps];
-    let mut map_keys: Vec<u64> = map.iter().map(|p| p.key).collect();
-    map_keys.par_sort_unstable();
-    map_keys.dedup();
     for (kf, (k, b)) in keyframes.iter().zip(&per_kf) {
         submap_box[kf.submap] = submap_box[kf.submap].union(b);
         if let (Some(&first), Some(&last)) = (k.first(), k.last()) {
@@ -164,10 +161,14 @@ pub fn generate(
             submap_box[kf.submap] = submap_box[kf.submap].union(&around);
         }
     }
-    let runs: Vec<&[u64]> = std::iter::once(&map_keys[..]).chain(per_kf.iter().map(|(k, _)| &k[..])).collect();
-    let mut session = InterestEvidence::from_sorted_runs(&runs, v);
-    drop(runs);
-    drop(map_keys);
+    // The interest keys: the map's and every keyframe's, each run sorted.
+    let mut session = {
+        let mut map_keys: Vec<u64> = map.iter().map(|p| p.key).collect();
+        map_keys.par_sort_unstable();
+        map_keys.dedup();
+        let runs: Vec<&[u64]> = std::iter::once(&map_keys[..]).chain(per_kf.iter().map(|(k, _)| &k[..])).collect();
+        InterestEvidence::from_sorted_runs(&runs, v)
+    };
     if cfg.clearance_near_ground_only || !cfg.ground_hits_guard || cfg.grow_max_hits > 0 || cfg.footing_height_m > 0.0 {
         session.set_ground(GroundLevel::from_keys(per_kf.iter().flat_map(|(k, _)| k)));
     }

@@ -147,7 +147,7 @@ pub(super) fn evidence(ctx: &mut StepCtx<'_>, step: &'static str, seq: i64) -> R
 
     // Publish the files, then record them with the step in one transaction.
     // Each file is compressed and synced on one thread, so they are written
-    // side by side (the labels, one row per point, take longest).
+    // side by side.
     let t_write = Instant::now();
     let by_ordinal: HashMap<usize, SubmapId> = ordinal.iter().map(|(id, o)| (*o, *id)).collect();
     let root = ctx.store.root();
