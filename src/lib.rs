@@ -5,9 +5,11 @@
 //! odometry pose, cuts the trajectory into submaps, aligns it with every
 //! earlier session (coarse map-to-map registration, intra- and inter-session
 //! loops accepted by the DOP test, a joint pose graph with submap anchors),
-//! and records each step as its own transaction. Directional ray-casting
-//! evidence (`evidence`, built, not yet in the pipeline), dynamic object
-//! removal and change detection plug into the same step framework.
+//! and records each step as its own transaction. Then directional
+//! ray-casting evidence for the new session (earlier sessions' evidence is
+//! reprojected through the moved anchors, not cast again), dynamic object
+//! removal, and change detection against the lifelong map, each a step of
+//! the same kind.
 //!
 //! # Layout
 //! - [`geometry`]: SE(3) poses, scans, voxel keys. No I/O.
@@ -19,7 +21,10 @@
 //!   placement, loop candidates, the joint graph per anchor mode.
 //! - [`registration`]: GICP, the DOP test, loop verification, global registration.
 //! - [`graph`]: the pose graph with submap anchors (LM on sparse Cholesky).
-//! - [`evidence`]: voxel ray casting and directional hit/free evidence, ε_l.
+//! - [`evidence`]: voxel ray casting and directional hit/free evidence, ε_l,
+//!   dynamic object removal, reprojection.
+//! - [`change`]: ELite's five categories on seam's evidence, ε_g, the
+//!   lifelong and static maps and the change events.
 //! - [`eval`]: metrics against ground truth (Umeyama, ATE, rigid residual).
 //! - [`store`]: the only module that touches SQLite and Parquet.
 //! - [`query`]: the query language: lexer, parser, planner to parameterised SQL, execution.

@@ -3,6 +3,7 @@
 
 fn main() -> std::process::ExitCode {
     restore_default_sigpipe();
+    seam::cli::tune_allocator();
     seam::cli::main()
 }
 

@@ -67,6 +67,16 @@ pub struct ChangeConfig {
     /// 99.30-99.73 %. 1.4 to 30 permanent voxels lost for each removed
     /// one; 0.15 changed nothing that matters (OS1-64 6.67, HDL-32E 6.72 %),
     /// 0.25 on the OS1-64 lost 697 for 72 (6.35 %).
+    ///
+    /// Re-run later the same day on the OS1-64 and HDL-32E sites, with
+    /// `free_support_keyframes` 4 as well (`bench/change_sites.py --sensors
+    /// os1-64,hdl-32e --config ...`; permanent static / removed left):
+    /// defaults 99.33 / 6.49 and 99.01 / 6.68 %; `eps_g_min` 0.2: 99.21 /
+    /// 6.23 and 98.89 / 4.97 %; `free_support_keyframes` 4: 99.31 / 6.41 and
+    /// 98.99 / 6.58 %; both: 99.19 / 6.18 and 98.87 / 4.92 %. The HDL-32E
+    /// just passes 5 %, the OS1-64 does not move: of its 1,468 leftovers
+    /// only 502 were ever seen free by a later session (2.32 % of those
+    /// voxels), and no weight on free evidence reaches the rest.
     pub eps_g_min: f64,
     pub eps_g_max: f64,
     /// The static map is the voxels with ε_g below this.

@@ -85,7 +85,15 @@ pub struct GenerationStats {
     /// (`evidence::grow`), not by their own voxel's ε_l.
     pub grown_points: usize,
     pub cleaned_voxels: usize,
+    /// Wall time before the first ray: interest keys, ground levels, the
+    /// no-return candidates and the surface shapes.
+    pub prepare_s: f64,
     pub raycast_s: f64,
+    /// ε_l, the dynamic voxels and every point's label (growth and footing
+    /// steps included).
+    pub dor_s: f64,
+    /// The cleaned maps.
+    pub cleaned_s: f64,
     pub total_s: f64,
 }
 
@@ -237,6 +245,7 @@ pub fn generate(
     };
 
     let t_ray = Instant::now();
+    stats.prepare_s = (t_ray - started).as_secs_f64();
     let mut submaps = Vec::with_capacity(n_submaps);
     let mut done = 0;
     let mut pts = Vec::new();
@@ -308,6 +317,7 @@ pub fn generate(
     }
     stats.raycast_s = t_ray.elapsed().as_secs_f64();
 
+    let t_dor = Instant::now();
     let eps = session.eps_l(cfg);
     let dynamic = dynamic_voxels(&session, &eps, cfg);
     stats.dynamic_voxels = dynamic.iter().filter(|&&d| d).count();
@@ -322,6 +332,8 @@ pub fn generate(
         verdicts.push(this);
         rest = more;
     }
+    let t_cleaned = Instant::now();
+    stats.dor_s = (t_cleaned - t_dor).as_secs_f64();
     // One submap at a time, each on every thread.
     let cleaned: Vec<CleanedMap> = (0..n_submaps)
         .map(|s| {
@@ -331,6 +343,7 @@ pub fn generate(
         })
         .collect();
     stats.cleaned_voxels = cleaned.iter().map(CleanedMap::len).sum();
+    stats.cleaned_s = t_cleaned.elapsed().as_secs_f64();
     stats.total_s = started.elapsed().as_secs_f64();
     SessionEvidence { submaps, cleaned, labels, stats }
 }
