@@ -21,7 +21,9 @@
 //! `eps_min`, `DOR_CLASSES=1` the removed share per semantic class,
 //! `DOR_INSTANCES=1` the removed moving points per instance and keyframe,
 //! `DOR_MISSES=1` the moving points kept and removed by height over their
-//! 0.2 m column's lowest static point, and `DOR_DUMP=FILE` writes every
+//! 0.2 m column's lowest static point and by range from the sensor (all,
+//! and those over a column with no static point: far movers on ground the
+//! rings do not sample), and `DOR_DUMP=FILE` writes every
 //! point's ε_l (f32, little endian) followed by its verdict (one byte each),
 //! in scan order, for comparing with another tool's labels point by point.
 
@@ -201,16 +203,26 @@ fn run() -> Result<(), String> {
                 }
             }
             let mut hist = [[0usize; 22]; 2];
+            // Range from the sensor in 5 m bins (the last: 50 m and more),
+            // for every moving point and for those over no floor.
+            let mut by_range = [[[0usize; 11]; 2]; 2];
             let mut row = 0;
             for (i, w) in world.iter().enumerate() {
                 for (j, q) in w.iter().enumerate() {
                     if is_moving_label(labels[i][j]) {
                         let b = floor.get(&cell(q)).map_or(21, |f| (((q[2] - f).max(0.0) / 0.1) as usize).min(20));
-                        hist[out.labels.dynamic[row + j] as usize][b] += 1;
+                        let d = out.labels.dynamic[row + j] as usize;
+                        hist[d][b] += 1;
+                        let p = scans[i][j];
+                        let r = ((p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt() / 5.0) as usize;
+                        by_range[usize::from(b == 21)][d][r.min(10)] += 1;
                     }
                 }
                 row += w.len();
             }
+            println!("  moving points by range (5 m bins, then 50 m and more): kept / removed");
+            println!("    all       : {:?} / {:?}", by_range[0][0], by_range[0][1]);
+            println!("    over none : {:?} / {:?}", by_range[1][0], by_range[1][1]);
             println!("  moving points by height over their 0.2 m column's lowest static point");
             println!("  (0.1 m bins, then 2 m and more, then no static point in the column)");
             println!("    kept   : {:?}\n    removed: {:?}", hist[0], hist[1]);
