@@ -642,6 +642,7 @@ struct RowsMut<'a> {
     keys: &'a [u64],
     rows: &'a mut [Row],
     log_odds: &'a mut [f32],
+    when: &'a mut [Span],
     unguarded: &'a [u64],
     ground: Option<&'a GroundLevel>,
 }
@@ -676,10 +677,11 @@ impl RowsMut<'_> {
         self.rows[lo..hi]
             .par_iter_mut()
             .zip(self.log_odds[lo..hi].par_iter_mut())
+            .zip(self.when[lo..hi].par_iter_mut())
             .zip(self.keys[lo..hi].par_iter())
             .enumerate()
             .with_min_len(4096)
-            .for_each(|(j, ((row, lo_odds), &pk))| {
+            .for_each(|(j, (((row, lo_odds), when), &pk))| {
                 let i = lo + j;
                 if bit_set(skip, i) {
                     return;
@@ -700,6 +702,11 @@ impl RowsMut<'_> {
                         && !self_unguarded(i)
                         && !shapes.and_then(|s| s.at(&k)).is_some_and(|s| s.from_map)
                 };
+                if kinds & HIT != 0 {
+                    when.hit(keyframe);
+                } else if kinds & FREE != 0 {
+                    when.free(keyframe);
+                }
                 if kinds & FREE != 0 && (kinds & HIT != 0 || guarded()) {
                     kinds &= !FREE;
                     if kinds == 0 {
@@ -737,6 +744,73 @@ fn ray_to_centre(k: VoxelKey, origin_m: &[f64; 3], voxel_m: f64) -> (nalgebra::V
 fn direction_and_weight((c, r): (nalgebra::Vector3<f64>, f64), cfg: &EvidenceConfig) -> ([f32; 3], f32) {
     let u = if r > 0.0 { [0, 1, 2].map(|a| (c[a] / r) as f32) } else { [0.0; 3] };
     (u, cfg.range_weight(r) as f32)
+}
+
+/// When a voxel was hit and crossed within one session, for the
+/// single-change test (`EvidenceConfig::change_once_min_frees`): the first
+/// and last keyframe index of each and how many keyframes did each.
+/// Crossings count whatever the own-hit guard drops (a keyframe that also
+/// hit the voxel counts as a hit only). Indices saturate at `u16::MAX`
+/// (sessions of more keyframes do not use the test). 12 bytes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Span {
+    pub first_hit: u16,
+    pub last_hit: u16,
+    pub first_free: u16,
+    pub last_free: u16,
+    pub hits: u16,
+    pub frees: u16,
+}
+
+impl Default for Span {
+    fn default() -> Self {
+        Span { first_hit: u16::MAX, last_hit: 0, first_free: u16::MAX, last_free: 0, hits: 0, frees: 0 }
+    }
+}
+
+impl Span {
+    fn hit(&mut self, keyframe: u32) {
+        let k = keyframe.min(u16::MAX as u32) as u16;
+        self.first_hit = self.first_hit.min(k);
+        self.last_hit = self.last_hit.max(k);
+        self.hits = self.hits.saturating_add(1);
+    }
+
+    fn free(&mut self, keyframe: u32) {
+        let k = keyframe.min(u16::MAX as u32) as u16;
+        self.first_free = self.first_free.min(k);
+        self.last_free = self.last_free.max(k);
+        self.frees = self.frees.saturating_add(1);
+    }
+
+    fn merge(&mut self, o: &Span) {
+        self.first_hit = self.first_hit.min(o.first_hit);
+        self.last_hit = self.last_hit.max(o.last_hit);
+        self.first_free = self.first_free.min(o.first_free);
+        self.last_free = self.last_free.max(o.last_free);
+        self.hits = self.hits.saturating_add(o.hits);
+        self.frees = self.frees.saturating_add(o.frees);
+    }
+
+    /// The keyframes in the middle of its run of crossings and of its run of
+    /// hits, when it changed once: at least `min_frees` consecutive keyframes
+    /// crossed it and at least `min_hits` consecutive keyframes hit it, and
+    /// one run ended before the other began (emerged: crossed, then hit;
+    /// vacated: hit, then crossed). `None` otherwise.
+    pub fn changed_once(&self, min_hits: u16, min_frees: u16) -> Option<(u16, u16)> {
+        let runs = |first: u16, last: u16, n: u16| n > 0 && last < u16::MAX && last - first + 1 == n;
+        let once = self.hits >= min_hits.max(1)
+            && self.frees >= min_frees.max(1)
+            && runs(self.first_hit, self.last_hit, self.hits)
+            && runs(self.first_free, self.last_free, self.frees)
+            && (self.last_free < self.first_hit || self.last_hit < self.first_free);
+        once.then(|| {
+            (
+                self.first_free + (self.last_free - self.first_free) / 2,
+                self.first_hit + (self.last_hit - self.first_hit) / 2,
+            )
+        })
+    }
 }
 
 /// One voxel's running evidence while keyframes are added (76 bytes).
@@ -818,6 +892,8 @@ pub struct InterestEvidence {
     /// Scalar log-odds per voxel, updated keyframe by keyframe with OctoMap's
     /// clamping (the baseline; kept whatever the model, it costs 4 bytes).
     log_odds: Vec<f32>,
+    /// When (keyframe indices) each row was hit and crossed ([`Span`]).
+    when: Vec<Span>,
     bounds: Box3,
     /// Rows freed without the own-hit guard and with the lower clearance
     /// (bit per row; empty: none; [`Self::set_unguarded`]).
@@ -1084,6 +1160,7 @@ impl InterestEvidence {
             keys,
             rows: vec![Row::default(); n],
             log_odds: vec![0.0; n],
+            when: vec![Span::default(); n],
             bounds,
             unguarded: Vec::new(),
             ground: None,
@@ -1233,7 +1310,7 @@ impl InterestEvidence {
         let b = Box3::of_rays(origin_m, points_m, v).intersect(&self.bounds).limit(o_key.0, DENSE_MAX_VOXELS);
         let cast = points_m.iter().filter(|p| voxel_key(p, v).is_some()).count();
         if !b.is_empty() {
-            let InterestEvidence { keys, rows, log_odds, bounds, unguarded, ground, index, .. } = self;
+            let InterestEvidence { keys, rows, log_odds, when, bounds, unguarded, ground, index, .. } = self;
             let ground = ground.as_deref();
             let rays = KeyframeRays {
                 origin_m,
@@ -1246,7 +1323,7 @@ impl InterestEvidence {
             // Voxels freed only under the lower clearance of the unguarded
             // (vacated map) voxels.
             let banded = !unguarded.is_empty() && cfg.vacated_clearance_m < cfg.free_clearance_m;
-            let mut rows = RowsMut { keys, rows, log_odds, unguarded, ground };
+            let mut rows = RowsMut { keys, rows, log_odds, when, unguarded, ground };
             // Only interest voxels get evidence: with a mask, rays report
             // only those and jump over the blocks that hold none.
             let index = index.get_or_init(|| KeyIndex::new(keys, bounds));
@@ -1325,6 +1402,7 @@ impl InterestEvidence {
             Row::add(&mut row.free_n, &mut row.free_q, &mut row.free_m, q, u);
             row.no_return_n += u32::from(map);
             row.offer_owner(keyframe, q);
+            self.when[i as usize].free(keyframe);
             let l = &mut self.log_odds[i as usize];
             *l = (*l + l_miss).clamp(l_min, l_max);
         }
@@ -1338,6 +1416,7 @@ impl InterestEvidence {
         for (j, &i) in idx.iter().enumerate() {
             self.rows[i as usize].merge(&other.rows[j]);
             self.log_odds[i as usize] = other.log_odds[j];
+            self.when[i as usize].merge(&other.when[j]);
         }
     }
 
@@ -1347,6 +1426,11 @@ impl InterestEvidence {
         for (j, &i) in idx.iter().enumerate() {
             sub.log_odds[j] = self.log_odds[i as usize];
         }
+    }
+
+    /// When each row was hit and crossed ([`Span`]).
+    pub fn when(&self) -> &[Span] {
+        &self.when
     }
 
     /// Clamped ε_l of every row under the configured model.
@@ -1414,6 +1498,38 @@ mod tests {
     use super::*;
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
+
+    /// The single-change test's record: one run of crossings wholly before
+    /// or after one run of hits, each of consecutive keyframes and long
+    /// enough; its middles; merging submaps' records.
+    #[test]
+    fn span_changes_once_only_in_consecutive_runs() {
+        let span = |hits: &[u32], frees: &[u32]| {
+            let mut s = Span::default();
+            hits.iter().for_each(|&k| s.hit(k));
+            frees.iter().for_each(|&k| s.free(k));
+            s
+        };
+        // Emerged: crossed by 0-3, hit by 4-6; vacated: hit by 2-3, crossed by 5-7.
+        assert_eq!(span(&[4, 5, 6], &[0, 1, 2, 3]).changed_once(2, 3), Some((1, 5)));
+        assert_eq!(span(&[2, 3], &[5, 6, 7]).changed_once(2, 3), Some((6, 2)));
+        // Too few of either.
+        assert_eq!(span(&[4], &[0, 1, 2, 3]).changed_once(2, 3), None);
+        assert_eq!(span(&[4, 5], &[2, 3]).changed_once(2, 3), None);
+        // Interleaved, or a run with a gap.
+        assert_eq!(span(&[3, 5], &[0, 1, 2, 4]).changed_once(2, 3), None);
+        assert_eq!(span(&[5, 6], &[0, 1, 3]).changed_once(2, 3), None);
+        assert_eq!(span(&[5, 7], &[0, 1, 2]).changed_once(2, 3), None);
+        // Never crossed or never hit.
+        assert_eq!(span(&[0, 1, 2], &[]).changed_once(2, 3), None);
+        assert_eq!(span(&[], &[0, 1, 2]).changed_once(2, 3), None);
+        // Two submaps' records merge into the session's.
+        let mut a = span(&[], &[0, 1]);
+        a.merge(&span(&[4, 5], &[2, 3]));
+        assert_eq!(a, span(&[4, 5], &[0, 1, 2, 3]));
+        // Indices past u16 saturate, and such runs never count.
+        assert_eq!(span(&[70_000, 70_001], &[0, 1, 2]).changed_once(2, 3), None);
+    }
 
     #[test]
     fn merged_runs_are_the_sorted_union() {

@@ -38,6 +38,12 @@
 //! - `no_return.rs`: free evidence from beams that returned nothing ([`no_return::NoReturnImage`])
 //! - `accumulate.rs`: [`accumulate_keyframe`] and its parallel twin
 //!   [`accumulate_keyframe_par`] into an [`EvidenceMap`]
+//! - `grid.rs`: the session's evidence on its sorted voxels of interest
+//!   ([`grid::InterestEvidence`]), with when each voxel was hit and crossed
+//!   ([`grid::Span`], for DOR's single-change test)
+//! - `session.rs`: one session from scans to evidence tables, DOR labels
+//!   (ε_l over `tau_dyn`, or changed once: [`session::dynamic_voxels`]) and
+//!   the cleaned map
 
 mod accumulate;
 pub mod grid;
