@@ -386,15 +386,18 @@ pub struct EvidenceConfig {
     ///
     /// Measured with `examples/dor_probe` (true poses), point-wise PR / RR /
     /// F1, off → on: SemanticKITTI 08 99.11 / 10.25 / 18.58 → 99.04 / 15.31 /
-    /// 26.52 (755 more moving points removed, 899 more static ones; the
-    /// creeping car 26 → 525 of its 5,235), 04 99.38 / 90.57 / 94.77 → 99.30
-    /// / 90.94 / 94.93; the simulated 60-keyframe sessions (seed 1) do not
-    /// change (Avia 22 more static points). Variants on 08: 4 crossings and 3
-    /// hits, PR 99.09, F1 24.52; runs not required to be consecutive
-    /// (3 / 2), PR 98.92, F1 28.61; no direction limit (4 / 3, consecutive),
-    /// PR 99.05 with 344 of 877 more static points within 10 m, against 4
-    /// with 12°; 20°, 30°: 24 and 293 of those; emerged only (crossed, then
-    /// hit) RR 13.26, vacated only 11.42 (4 / 3, any order).
+    /// 26.52 (755 more moving points removed for 786 more static ones; the
+    /// creeping car 26 → 525 of its 5,235), 04 99.38 / 90.57 / 94.77 → 99.31
+    /// / 90.94 / 94.94; the simulated 60-keyframe sessions (seed 1) remove
+    /// the same moving points and at most 46 more static ones (Avia).
+    /// Variants on 08 (04): 8° F1 25.11 at PR 99.06 % (94.88), 9° 25.34
+    /// (94.94), 12° and 15° 26.52 with 93 and 226 more static points (157
+    /// and 350 on 04); 4 crossings and 2 hits 24.82, 3 and 3 26.22; runs not
+    /// required to be consecutive (3 / 2, 12°) 28.61 at PR 98.92 %. Without
+    /// the direction limit (4 / 3), 344 of the 761 static points it added on
+    /// 08 lay within 10 m of the sensor; 4 with 12°, 24 with 20°, 293 with
+    /// 30°. Emerged only (crossed, then hit) RR 13.26 %, vacated only 11.42
+    /// (4 / 3, any order, 12°).
     pub change_once_min_frees: u32,
     /// The consecutive keyframes that must hit a voxel for the single-change
     /// test (`change_once_min_frees`).
@@ -562,7 +565,7 @@ impl Default for EvidenceConfig {
             own_no_return_max_keyframes: 2,
             change_once_min_frees: 3,
             change_once_min_hits: 2,
-            change_once_max_deg: 12.0,
+            change_once_max_deg: 10.0,
             model: EvidenceModel::Directional,
             log_odds: LogOddsConfig::default(),
         }
@@ -630,7 +633,7 @@ impl EvidenceConfig {
         }
         if !(0.0..=180.0).contains(&self.change_once_max_deg) {
             return Err(format!(
-                "evidence.change_once_max_deg is {}; it must lie in [0, 180] degrees (default 12)",
+                "evidence.change_once_max_deg is {}; it must lie in [0, 180] degrees (default 10)",
                 self.change_once_max_deg
             ));
         }
