@@ -703,9 +703,9 @@ impl RowsMut<'_> {
                         && !shapes.and_then(|s| s.at(&k)).is_some_and(|s| s.from_map)
                 };
                 if kinds & HIT != 0 {
-                    when.hit(keyframe);
+                    when.hits.add(keyframe);
                 } else if kinds & FREE != 0 {
-                    when.free(keyframe);
+                    when.frees.add(keyframe);
                 }
                 if kinds & FREE != 0 && (kinds & HIT != 0 || guarded()) {
                     kinds &= !FREE;
@@ -747,49 +747,60 @@ fn direction_and_weight((c, r): (nalgebra::Vector3<f64>, f64), cfg: &EvidenceCon
 }
 
 /// When a voxel was hit and crossed within one session, for the
-/// single-change test (`EvidenceConfig::change_once_min_frees`): the first
-/// and last keyframe index of each and how many keyframes did each.
-/// Crossings count whatever the own-hit guard drops (a keyframe that also
-/// hit the voxel counts as a hit only). Indices saturate at `u16::MAX`
-/// (sessions of more keyframes do not use the test). 12 bytes.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// single-change test (`EvidenceConfig::change_once_min_frees`): a [`Run`]
+/// of each. Crossings count whatever the own-hit guard drops (a keyframe
+/// that also hit the voxel counts as a hit only). 12 bytes.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct Span {
-    pub first_hit: u16,
-    pub last_hit: u16,
-    pub first_free: u16,
-    pub last_free: u16,
-    pub hits: u16,
-    pub frees: u16,
+    pub hits: Run,
+    pub frees: Run,
 }
 
-impl Default for Span {
+/// The keyframes that did one thing to a voxel: the first and last index
+/// (`u16::MAX` / 0 when none) and how many. Indices saturate at `u16::MAX`
+/// (sessions of more keyframes do not use the test).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Run {
+    pub first: u16,
+    pub last: u16,
+    pub n: u16,
+}
+
+impl Default for Run {
     fn default() -> Self {
-        Span { first_hit: u16::MAX, last_hit: 0, first_free: u16::MAX, last_free: 0, hits: 0, frees: 0 }
+        Run { first: u16::MAX, last: 0, n: 0 }
+    }
+}
+
+impl Run {
+    fn add(&mut self, keyframe: u32) {
+        let k = u16::try_from(keyframe).unwrap_or(u16::MAX);
+        self.first = self.first.min(k);
+        self.last = self.last.max(k);
+        self.n = self.n.saturating_add(1);
+    }
+
+    fn merge(&mut self, o: &Run) {
+        self.first = self.first.min(o.first);
+        self.last = self.last.max(o.last);
+        self.n = self.n.saturating_add(o.n);
+    }
+
+    /// At least `min` (and at least one) keyframes, consecutive, none
+    /// saturated.
+    fn consecutive(&self, min: u16) -> bool {
+        self.n >= min.max(1) && self.last < u16::MAX && self.last - self.first + 1 == self.n
+    }
+
+    fn middle(&self) -> u16 {
+        self.first + (self.last - self.first) / 2
     }
 }
 
 impl Span {
-    fn hit(&mut self, keyframe: u32) {
-        let k = keyframe.min(u16::MAX as u32) as u16;
-        self.first_hit = self.first_hit.min(k);
-        self.last_hit = self.last_hit.max(k);
-        self.hits = self.hits.saturating_add(1);
-    }
-
-    fn free(&mut self, keyframe: u32) {
-        let k = keyframe.min(u16::MAX as u32) as u16;
-        self.first_free = self.first_free.min(k);
-        self.last_free = self.last_free.max(k);
-        self.frees = self.frees.saturating_add(1);
-    }
-
     fn merge(&mut self, o: &Span) {
-        self.first_hit = self.first_hit.min(o.first_hit);
-        self.last_hit = self.last_hit.max(o.last_hit);
-        self.first_free = self.first_free.min(o.first_free);
-        self.last_free = self.last_free.max(o.last_free);
-        self.hits = self.hits.saturating_add(o.hits);
-        self.frees = self.frees.saturating_add(o.frees);
+        self.hits.merge(&o.hits);
+        self.frees.merge(&o.frees);
     }
 
     /// The keyframes in the middle of its run of crossings and of its run of
@@ -798,18 +809,9 @@ impl Span {
     /// one run ended before the other began (emerged: crossed, then hit;
     /// vacated: hit, then crossed). `None` otherwise.
     pub fn changed_once(&self, min_hits: u16, min_frees: u16) -> Option<(u16, u16)> {
-        let runs = |first: u16, last: u16, n: u16| n > 0 && last < u16::MAX && last - first + 1 == n;
-        let once = self.hits >= min_hits.max(1)
-            && self.frees >= min_frees.max(1)
-            && runs(self.first_hit, self.last_hit, self.hits)
-            && runs(self.first_free, self.last_free, self.frees)
-            && (self.last_free < self.first_hit || self.last_hit < self.first_free);
-        once.then(|| {
-            (
-                self.first_free + (self.last_free - self.first_free) / 2,
-                self.first_hit + (self.last_hit - self.first_hit) / 2,
-            )
-        })
+        let (h, f) = (&self.hits, &self.frees);
+        let once = h.consecutive(min_hits) && f.consecutive(min_frees) && (f.last < h.first || h.last < f.first);
+        once.then(|| (f.middle(), h.middle()))
     }
 }
 
@@ -1402,7 +1404,7 @@ impl InterestEvidence {
             Row::add(&mut row.free_n, &mut row.free_q, &mut row.free_m, q, u);
             row.no_return_n += u32::from(map);
             row.offer_owner(keyframe, q);
-            self.when[i as usize].free(keyframe);
+            self.when[i as usize].frees.add(keyframe);
             let l = &mut self.log_odds[i as usize];
             *l = (*l + l_miss).clamp(l_min, l_max);
         }
@@ -1506,8 +1508,8 @@ mod tests {
     fn span_changes_once_only_in_consecutive_runs() {
         let span = |hits: &[u32], frees: &[u32]| {
             let mut s = Span::default();
-            hits.iter().for_each(|&k| s.hit(k));
-            frees.iter().for_each(|&k| s.free(k));
+            hits.iter().for_each(|&k| s.hits.add(k));
+            frees.iter().for_each(|&k| s.frees.add(k));
             s
         };
         // Emerged: crossed by 0-3, hit by 4-6; vacated: hit by 2-3, crossed by 5-7.

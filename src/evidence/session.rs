@@ -449,8 +449,8 @@ pub fn dynamic_voxels(
     let v = session.voxel_m;
     let min_cos = cfg.change_once_max_deg.to_radians().cos();
     let single_change = cfg.change_once_min_frees > 0 && cfg.model == EvidenceModel::Directional;
-    let (min_hits, min_frees) =
-        (cfg.change_once_min_hits.min(u16::MAX as u32) as u16, cfg.change_once_min_frees.min(u16::MAX as u32) as u16);
+    let [min_hits, min_frees] =
+        [cfg.change_once_min_hits, cfg.change_once_min_frees].map(|n| u16::try_from(n).unwrap_or(u16::MAX));
     // Changed once, as seen from about the same direction.
     let changed_once = |i: usize| {
         let Some((crossed, hit)) = when[i].changed_once(min_hits, min_frees) else {
