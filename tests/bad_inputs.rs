@@ -257,7 +257,8 @@ fn bad_alignment_options_and_settings() {
 
 /// The evidence stage's inputs (issue 4): an unknown evidence model or free
 /// test, a negative clearance or surface tolerance, an ω floor above 1 or
-/// no free support in the config is a usage error (exit 2) naming the key
+/// no free support in the config (among others: the single-change test's
+/// angle and hits) is a usage error (exit 2) naming the key
 /// (or the values it takes); `seam eval dor` with a labels folder that has no labels, or a session
 /// the store does not have, is a data error (exit 4) naming the file or the
 /// sessions there are. The store is unchanged every time.
@@ -306,6 +307,10 @@ fn bad_evidence_settings_and_dor_inputs() {
     std::fs::write(&own_elev, "[evidence]\nown_no_return_min_elevation_deg = 91\n").unwrap();
     let own_kf = t.path().join("own_kf.toml");
     std::fs::write(&own_kf, "[evidence]\nown_no_return_max_keyframes = 0\n").unwrap();
+    let once_deg = t.path().join("once_deg.toml");
+    std::fs::write(&once_deg, "[evidence]\nchange_once_max_deg = 200.0\n").unwrap();
+    let once_hits = t.path().join("once_hits.toml");
+    std::fs::write(&once_hits, "[evidence]\nchange_once_min_hits = 0\n").unwrap();
     for (cfg, fragment) in [
         (&model, "octomap"),
         (&clearance, "free_clearance_m"),
@@ -327,6 +332,8 @@ fn bad_evidence_settings_and_dor_inputs() {
         (&own_range, "own_no_return_range_m"),
         (&own_elev, "own_no_return_min_elevation_deg"),
         (&own_kf, "own_no_return_max_keyframes"),
+        (&once_deg, "change_once_max_deg"),
+        (&once_hits, "change_once_min_hits"),
     ] {
         let o = run(&["--config", cfg.to_str().unwrap(), "ingest", st, dir]);
         assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
