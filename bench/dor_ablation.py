@@ -17,8 +17,9 @@ same rays:
    `seam simulate --sessions 1`, the same recipe as `dor_vs_dufomap.py`),
    `seam ingest` into a store with the default config ("seam") and into one
    with `[evidence] model = "log_odds"` ("seam-scalar"), both with the
-   growth and footing steps off (`grow_max_hits = 0`, `footing_height_m =
-   0`, `evidence::grow`) and the single-change test off
+   growth, cluster and footing steps off (`grow_max_hits = 0`,
+   `cluster_share = 0`, `footing_height_m = 0`, `evidence::grow`) and the
+   single-change test off
    (`change_once_min_frees = 0`): they work beside or on the verdicts
    either model gives, so they are no part of the evidence model this
    compares, and a grown or changed-once point's verdict is not its
@@ -120,7 +121,7 @@ def main():
 
     work, binary = seam_in_work("dor_ablation", args.seam, args.no_build, args.out, "dor_ablation-")
     seam = Seam(binary)
-    no_grow = "grow_max_hits = 0\nfooting_height_m = 0\nchange_once_min_frees = 0\n"
+    no_grow = "grow_max_hits = 0\ncluster_share = 0\nfooting_height_m = 0\nchange_once_min_frees = 0\n"
     seam_cfg = work / "directional_no_grow.toml"
     seam_cfg.write_text("[evidence]\n" + no_grow)
     scalar_cfg = work / "log_odds.toml"

@@ -98,7 +98,7 @@ VOXEL_TOML = '[evidence]\nfree_test = "voxel"\n'
 # clamp 0 so τ_dyn just above 0 separates f = 0 from f > 0).
 CEILING_TOML = ('[evidence]\nfree_test = "voxel"\none_ray_per_voxel = false\nfree_guard_voxels = 0\nfree_guard_deg = 0\n'
                 'free_clearance_m = 0\nomega_floor = 1\neps_min = 0\ntau_dyn = 0.000001\ngrow_max_hits = 0\n'
-                'footing_height_m = 0\nown_no_return_range_m = 0\nchange_once_min_frees = 0\n')
+                'cluster_share = 0\nfooting_height_m = 0\nown_no_return_range_m = 0\nchange_once_min_frees = 0\n')
 SENSORS = "os1-64,hdl-64e,vlp16,hdl-32e,avia"
 DUFOMAP_DEFAULT = "0.1,0.2,1;0.1,0.2,2;0.2,0.2,1"
 

@@ -95,6 +95,15 @@ fn semantickitti_dor_keeps_static_structure_and_removes_movers() {
             "{seq}: the growth step removed no more movers: {seam} vs {no_grow}"
         );
         assert!(f(&no_grow, "pr") >= f(&seam, "pr"), "{seq}: growth cannot keep more static points");
+        // The cluster step: what is left of a keyframe's piece mostly
+        // removed (`examples/dor_probe`, true poses: F1 95.17 → 95.42 on 04,
+        // 27.01 → 27.10 on 08).
+        let no_cluster =
+            dor_scores(&dir, tmp.path(), &format!("kitti{seq}-no-cluster"), "[evidence]\ncluster_share = 0\n");
+        assert!(
+            f(&seam, "dynamic_removed") > f(&no_cluster, "dynamic_removed") && f(&seam, "f1") > f(&no_cluster, "f1"),
+            "{seq}: the cluster step removed no more movers: {seam} vs {no_cluster}"
+        );
         // Measured F1 93.84 → 94.77 (04) and 18.20 → 18.58 % (08) with the
         // footing step: movers' points within 0.2 m of the ground.
         let no_footing =

@@ -34,7 +34,9 @@
 //! - `surface.rs`: the sub-voxel free test ([`surface::SurfaceShapes`])
 //! - `ground.rs`: each voxel column's ground level, for the clearance and
 //!   the guard ([`ground::GroundLevel`])
-//! - `grow.rs`: DOR's growth of a keyframe's dynamic verdict into unseen neighbours ([`grow::keyframe_dynamic`])
+//! - `grow.rs`: DOR's growth of a keyframe's dynamic verdict into weakly
+//!   seen neighbours, its cluster step (pieces mostly dynamic go whole) and
+//!   its footing step ([`grow::keyframe_dynamic`])
 //! - `no_return.rs`: free evidence from beams that returned nothing ([`no_return::NoReturnImage`])
 //! - `accumulate.rs`: [`accumulate_keyframe`] and its parallel twin
 //!   [`accumulate_keyframe_par`] into an [`EvidenceMap`]

@@ -505,7 +505,7 @@ fn label_points(
             // A point without a row (non-finite, out of range) is kept:
             // there is no evidence that it moved.
             let rows: Vec<Option<usize>> = world_points(kf).iter().map(|p| row_at(session, p)).collect();
-            let (verdicts, grown) = keyframe_dynamic(&rows, session, dynamic, session.ground(), cfg);
+            let (verdicts, grown) = keyframe_dynamic(&origin(kf), &rows, session, dynamic, session.ground(), cfg);
             let (mut feet, mut band) = (Vec::new(), Vec::new());
             if let Some(at_ground) = &at_ground {
                 feet = footing_candidates(&rows, session, &verdicts, at_ground);
@@ -1281,8 +1281,10 @@ mod tests {
         let (low, middle) = removed(&cfg);
         assert!(low > 0.8 && middle > 0.8, "defaults: lowest layer {low:.2}, middle {middle:.2} removed");
         // Each rule on its own, without the footing step (which takes the
-        // lowest layer's points beside a removed middle).
-        let no_footing = EvidenceConfig { footing_height_m: 0.0, ..cfg.clone() };
+        // lowest layer's points beside a removed middle), the cluster step
+        // (what is left of a piece mostly removed) and growth into voxels
+        // some keyframe saw free.
+        let no_footing = EvidenceConfig { footing_height_m: 0.0, cluster_share: 0.0, grow_freed: false, ..cfg.clone() };
         let clearance = EvidenceConfig { clearance_near_ground_only: false, ..no_footing.clone() };
         let (_, middle_old) = removed(&clearance);
         assert!(middle_old < 0.2, "the clearance on every downward ray keeps the middle: {middle_old:.2}");

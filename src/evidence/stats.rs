@@ -151,6 +151,26 @@ pub struct EvidenceConfig {
     pub grow_max_hits: u32,
     /// ... at most this many voxel steps from a voxel dynamic by ε_l.
     pub grow_depth_voxels: u32,
+    /// Growth also enters voxels some keyframe saw free (still at most
+    /// `grow_max_hits` hits): evidence both ways that ε_l did not find
+    /// decisive, where the neighbours decide. false: only voxels no
+    /// keyframe saw free (their own evidence decides). Numbers in
+    /// `evidence::grow`'s docs.
+    pub grow_freed: bool,
+    /// DOR's cluster step (`evidence::grow`): a keyframe's points joined
+    /// through their voxels above the ground level (`evidence::ground`),
+    /// neighbours up to `cluster_reach_deg` of arc apart, form pieces; a
+    /// piece of at most `cluster_max_voxels` voxels whose points are at least
+    /// this share dynamic (after growth) becomes dynamic whole. 0 disables.
+    pub cluster_share: f64,
+    /// The cluster step's reach between voxels of a piece, degrees of arc
+    /// seen from the keyframe's sensor: 1 voxel near, up to 3 far (at 0.8°
+    /// and 0.2 m voxels, 2 from 21 m and 3 from 36 m), so a far mover whose
+    /// beams land a voxel or two apart is still one piece.
+    pub cluster_reach_deg: f64,
+    /// A piece larger than this many voxels (a building, a stretch of
+    /// fence) is never made dynamic.
+    pub cluster_max_voxels: u32,
     /// DOR's footing step (`evidence::grow`): a static point in a voxel at
     /// its column's ground level, beside a voxel with a dynamic point of the
     /// same keyframe, becomes dynamic when it lies more than this above the
@@ -538,6 +558,10 @@ impl Default for EvidenceConfig {
             static_neighbour_veto: false,
             grow_max_hits: 2,
             grow_depth_voxels: 2,
+            grow_freed: true,
+            cluster_share: 0.6,
+            cluster_reach_deg: 0.8,
+            cluster_max_voxels: 1500,
             footing_height_m: 0.05,
             footing_max_keyframes: 2,
             free_clearance_m: 0.2,
@@ -607,6 +631,23 @@ impl EvidenceConfig {
                 "evidence.grow_depth_voxels is {}; it must lie in 0..=8 voxel steps (default 2; 0 turns growth off)",
                 self.grow_depth_voxels
             ));
+        }
+        if !(0.0..=1.0).contains(&self.cluster_share) {
+            return Err(format!(
+                "evidence.cluster_share is {}; it must lie in [0, 1] (default 0.6; 0 turns the cluster step off)",
+                self.cluster_share
+            ));
+        }
+        if !(self.cluster_reach_deg > 0.0 && self.cluster_reach_deg <= 10.0) {
+            return Err(format!(
+                "evidence.cluster_reach_deg is {}; it must lie in (0, 10] degrees (default 0.8)",
+                self.cluster_reach_deg
+            ));
+        }
+        if self.cluster_share > 0.0 && self.cluster_max_voxels == 0 {
+            return Err("evidence.cluster_max_voxels is 0; it must be at least 1 while cluster_share is on \
+                        (default 1500)"
+                .into());
         }
         if self.footing_max_keyframes == 0 {
             return Err("evidence.footing_max_keyframes is 0; it must be at least 1, the point's own keyframe \
@@ -1045,6 +1086,17 @@ mod tests {
         let hits = EvidenceConfig { change_once_min_hits: 0, ..cfg.clone() }.validate().unwrap_err();
         assert!(hits.contains("change_once_min_hits"), "{hits}");
         assert!(EvidenceConfig { change_once_min_hits: 0, change_once_min_frees: 0, ..cfg.clone() }.validate().is_ok());
+        for bad in [
+            EvidenceConfig { cluster_share: 1.5, ..cfg.clone() },
+            EvidenceConfig { cluster_share: f64::NAN, ..cfg.clone() },
+        ] {
+            assert!(bad.validate().unwrap_err().contains("cluster_share"));
+        }
+        let reach = EvidenceConfig { cluster_reach_deg: 0.0, ..cfg.clone() }.validate().unwrap_err();
+        assert!(reach.contains("cluster_reach_deg"), "{reach}");
+        let size = EvidenceConfig { cluster_max_voxels: 0, ..cfg.clone() }.validate().unwrap_err();
+        assert!(size.contains("cluster_max_voxels"), "{size}");
+        assert!(EvidenceConfig { cluster_max_voxels: 0, cluster_share: 0.0, ..cfg.clone() }.validate().is_ok());
         assert!(EvidenceConfig { voxel_size_m: -1.0, ..cfg }.validate().unwrap_err().contains("voxel_size_m"));
     }
 }
