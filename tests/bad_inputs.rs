@@ -311,6 +311,8 @@ fn bad_evidence_settings_and_dor_inputs() {
     std::fs::write(&once_deg, "[evidence]\nchange_once_max_deg = 200.0\n").unwrap();
     let once_hits = t.path().join("once_hits.toml");
     std::fs::write(&once_hits, "[evidence]\nchange_once_min_hits = 0\n").unwrap();
+    let cluster = t.path().join("cluster.toml");
+    std::fs::write(&cluster, "[evidence]\ncluster_share = 60\n").unwrap();
     for (cfg, fragment) in [
         (&model, "octomap"),
         (&clearance, "free_clearance_m"),
@@ -334,6 +336,7 @@ fn bad_evidence_settings_and_dor_inputs() {
         (&own_kf, "own_no_return_max_keyframes"),
         (&once_deg, "change_once_max_deg"),
         (&once_hits, "change_once_min_hits"),
+        (&cluster, "cluster_share"),
     ] {
         let o = run(&["--config", cfg.to_str().unwrap(), "ingest", st, dir]);
         assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));

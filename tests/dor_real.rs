@@ -97,7 +97,7 @@ fn semantickitti_dor_keeps_static_structure_and_removes_movers() {
         assert!(f(&no_grow, "pr") >= f(&seam, "pr"), "{seq}: growth cannot keep more static points");
         // The cluster step: what is left of a keyframe's piece mostly
         // removed (`examples/dor_probe`, true poses: F1 95.17 → 95.42 on 04,
-        // 27.01 → 27.10 on 08).
+        // 27.01 → 27.26 on 08).
         let no_cluster =
             dor_scores(&dir, tmp.path(), &format!("kitti{seq}-no-cluster"), "[evidence]\ncluster_share = 0\n");
         assert!(

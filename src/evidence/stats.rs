@@ -559,7 +559,7 @@ impl Default for EvidenceConfig {
             grow_max_hits: 2,
             grow_depth_voxels: 2,
             grow_freed: true,
-            cluster_share: 0.6,
+            cluster_share: 0.5,
             cluster_reach_deg: 0.8,
             cluster_max_voxels: 1500,
             footing_height_m: 0.05,
@@ -634,7 +634,7 @@ impl EvidenceConfig {
         }
         if !(0.0..=1.0).contains(&self.cluster_share) {
             return Err(format!(
-                "evidence.cluster_share is {}; it must lie in [0, 1] (default 0.6; 0 turns the cluster step off)",
+                "evidence.cluster_share is {}; it must lie in [0, 1] (default 0.5; 0 turns the cluster step off)",
                 self.cluster_share
             ));
         }
