@@ -152,10 +152,10 @@ pub struct EvidenceConfig {
     /// ... at most this many voxel steps from a voxel dynamic by ε_l.
     pub grow_depth_voxels: u32,
     /// Growth also enters voxels some keyframe saw free (still at most
-    /// `grow_max_hits` hits): evidence both ways that ε_l did not find
-    /// decisive, where the neighbours decide. false: only voxels no
-    /// keyframe saw free (their own evidence decides). Numbers in
-    /// `evidence::grow`'s docs.
+    /// `grow_max_hits` hits) above the ground level (`evidence::ground`):
+    /// evidence both ways that ε_l did not find decisive, where the
+    /// neighbours decide. false: only voxels no keyframe saw free (their
+    /// own evidence decides). Numbers in `evidence::grow`'s docs.
     pub grow_freed: bool,
     /// DOR's cluster step (`evidence::grow`): a keyframe's points joined
     /// through their voxels above the ground level (`evidence::ground`),
