@@ -313,6 +313,10 @@ fn bad_evidence_settings_and_dor_inputs() {
     std::fs::write(&once_hits, "[evidence]\nchange_once_min_hits = 0\n").unwrap();
     let cluster = t.path().join("cluster.toml");
     std::fs::write(&cluster, "[evidence]\ncluster_share = 60\n").unwrap();
+    let reach = t.path().join("reach.toml");
+    std::fs::write(&reach, "[evidence]\ncluster_reach_deg = 0.0\n").unwrap();
+    let piece = t.path().join("piece.toml");
+    std::fs::write(&piece, "[evidence]\ncluster_max_voxels = 0\n").unwrap();
     for (cfg, fragment) in [
         (&model, "octomap"),
         (&clearance, "free_clearance_m"),
@@ -337,6 +341,8 @@ fn bad_evidence_settings_and_dor_inputs() {
         (&once_deg, "change_once_max_deg"),
         (&once_hits, "change_once_min_hits"),
         (&cluster, "cluster_share"),
+        (&reach, "cluster_reach_deg"),
+        (&piece, "cluster_max_voxels"),
     ] {
         let o = run(&["--config", cfg.to_str().unwrap(), "ingest", st, dir]);
         assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));

@@ -123,6 +123,7 @@ use super::grid::{InterestEvidence, bit_set, pack, unpack};
 use super::ground::GroundLevel;
 use super::stats::EvidenceConfig;
 use crate::geometry::VoxelKey;
+use nalgebra::Vector3;
 use rayon::prelude::*;
 use rustc_hash::{FxHashMap, FxHashSet};
 
@@ -161,12 +162,13 @@ pub fn keyframe_dynamic(
             && if r.free_n == 0 {
                 !ground.is_some_and(|g| g.is_lowest(&k))
             } else {
-                cfg.grow_freed && ground.is_none_or(|g| g.at_ground(&k) != Some(true))
+                cfg.grow_freed && above_ground(ground, &k)
             }
     };
     let mut frontier: Vec<usize> = voxels.iter().filter(|&(_, &(d, _))| d).map(|(&i, _)| i).collect();
     frontier.sort_unstable();
-    for _ in 0..if grow { cfg.grow_depth_voxels } else { 0 } {
+    let depth = if grow { cfg.grow_depth_voxels } else { 0 };
+    for _ in 0..depth {
         let mut next = Vec::new();
         for &i in &frontier {
             for (_, n) in unpack(keys[i]).neighbours(1) {
@@ -201,6 +203,12 @@ pub fn keyframe_dynamic(
     (out, added)
 }
 
+/// Whether voxel `k` lies above its column's ground level
+/// (`GroundLevel::at_ground`), or no ground level is known.
+fn above_ground(ground: Option<&GroundLevel>, k: &[i32; 3]) -> bool {
+    ground.is_none_or(|g| g.at_ground(k) != Some(true))
+}
+
 /// The farthest reach of the cluster step between two voxels of a piece,
 /// in voxels along each axis: 7³ − 1 neighbours looked up per voxel at most.
 const CLUSTER_MAX_REACH_VOXELS: i32 = 3;
@@ -223,29 +231,32 @@ fn pieces_mostly_dynamic(
 ) {
     let keys = session.keys();
     let v = session.voxel_m;
-    // The keyframe's voxels above the ground level: key → row.
-    let above = |k: &[i32; 3]| ground.is_none_or(|g| g.at_ground(k) != Some(true));
-    let mut seeds: Vec<[i32; 3]> =
-        voxels.iter().filter(|(_, (d, _))| *d).map(|(&r, _)| unpack(keys[r]).0).filter(above).collect();
+    // The dynamic voxels above the ground level: (key, row).
+    let mut seeds: Vec<([i32; 3], usize)> = voxels
+        .iter()
+        .filter(|(_, (d, _))| *d)
+        .map(|(&r, _)| (unpack(keys[r]).0, r))
+        .filter(|(k, _)| above_ground(ground, k))
+        .collect();
     if seeds.is_empty() {
         return;
     }
     // The row of a keyframe voxel above the ground level at key `k`.
     let own = |k: [i32; 3]| {
         let r = pack(VoxelKey(k)).and_then(|p| session.find(p))?;
-        (voxels.contains_key(&r) && above(&k)).then_some(r)
+        (voxels.contains_key(&r) && above_ground(ground, &k)).then_some(r)
     };
+    let origin = Vector3::from(*origin_m);
     let tan = cfg.cluster_reach_deg.to_radians().tan();
     let reach = |k: &[i32; 3]| {
-        let r_m = (0..3).map(|a| ((k[a] as f64 + 0.5) * v - origin_m[a]).powi(2)).sum::<f64>().sqrt();
+        let r_m = (VoxelKey(*k).center_m(v) - origin).norm();
         ((r_m * tan / v).round() as i32).clamp(1, CLUSTER_MAX_REACH_VOXELS)
     };
     seeds.sort_unstable();
     let max = cfg.cluster_max_voxels as usize;
     let mut seen: FxHashSet<usize> = FxHashSet::default();
     let mut turned = Vec::new();
-    for seed in seeds {
-        let Some(row) = own(seed) else { continue };
+    for (seed, row) in seeds {
         if !seen.insert(row) {
             continue;
         }
