@@ -317,6 +317,12 @@ fn bad_evidence_settings_and_dor_inputs() {
     std::fs::write(&reach, "[evidence]\ncluster_reach_deg = 0.0\n").unwrap();
     let piece = t.path().join("piece.toml");
     std::fs::write(&piece, "[evidence]\ncluster_max_voxels = 0\n").unwrap();
+    let object = t.path().join("object.toml");
+    std::fs::write(&object, "[change]\nobject_share = 1.5\n").unwrap();
+    let object_max = t.path().join("object_max.toml");
+    std::fs::write(&object_max, "[change]\nobject_max_voxels = 0\n").unwrap();
+    let object_new = t.path().join("object_new.toml");
+    std::fs::write(&object_new, "[change]\nobject_max_new = -1.0\n").unwrap();
     for (cfg, fragment) in [
         (&model, "octomap"),
         (&clearance, "free_clearance_m"),
@@ -343,6 +349,9 @@ fn bad_evidence_settings_and_dor_inputs() {
         (&cluster, "cluster_share"),
         (&reach, "cluster_reach_deg"),
         (&piece, "cluster_max_voxels"),
+        (&object, "object_share"),
+        (&object_max, "object_max_voxels"),
+        (&object_new, "object_max_new"),
     ] {
         let o = run(&["--config", cfg.to_str().unwrap(), "ingest", st, dir]);
         assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
