@@ -1228,8 +1228,8 @@ mod tests {
     /// static; with `object_share`, what is left of the stack goes with it.
     /// A wall session 2 does not see at all, 5 of its voxels freed (a few
     /// rays grazing it), stays whole; so does the ground. A box replaced by
-    /// another that session 2 sees from one side only keeps its unseen
-    /// part: half its piece lies next to the new box's voxels.
+    /// another that session 2 sees from two sides only keeps its unseen
+    /// part: 21 of the new box's voxels lie in the box of its 12-voxel piece.
     #[test]
     fn what_is_left_of_an_object_mostly_seen_gone_goes_with_it() {
         let at = |x: i32, y: i32, z: i32| nv([x as f64 * 0.2 + 0.1, y as f64 * 0.2 + 0.1, z as f64 * 0.2 + 0.1], 0.1);
