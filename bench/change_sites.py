@@ -85,7 +85,7 @@ def run_site(seam, work, sensor, args, configs):
             "ate_max_session_m": max((s.get("ate_rmse_m") or 0.0 for s in al.get("sessions", [])), default=None),
             "ingest_s": ingest_s,
         })
-        if not args.out:
+        if not args.keep_stores:
             shutil.rmtree(store, ignore_errors=True)
     return rows
 
@@ -105,9 +105,13 @@ def main():
     ap.add_argument("--threads", type=int, default=0)
     ap.add_argument("--seam", default=str(Path(__file__).resolve().parents[1] / "target" / "release" / "seam"))
     ap.add_argument("--no-build", action="store_true")
-    ap.add_argument("--out", help="keep simulations and stores here (default: a temp dir, removed)")
+    ap.add_argument("--out", help="keep simulations here (default: a temp dir, removed)")
+    ap.add_argument("--keep-stores", action="store_true",
+                    help="keep each store (~1 GB for 5 x 150 keyframes) in --out after it is scored")
     ap.add_argument("--json", help="write every number here")
     args = ap.parse_args()
+    if args.keep_stores and not args.out:
+        sys.exit("change_sites: --keep-stores needs --out")
     configs = [None if c == "default" else str(Path(c).resolve()) for c in args.config] or [None]
     for c in configs:
         if c is not None and not Path(c).is_file():

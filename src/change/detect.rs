@@ -49,7 +49,7 @@
 use super::lifelong::{Category, ChangeEvent, LifelongMap, MapVoxel};
 use super::places::{find, union};
 use crate::evidence::grid::{pack, unpack};
-use crate::evidence::ground::GROUND_BAND_VOXELS;
+use crate::evidence::ground::GroundLevel;
 use crate::evidence::surface::plane_normal;
 use crate::geometry::{SYM3_PAIRS, Sym3, UNKNOWN_SPREAD, VoxelKey};
 use crate::registration::kdtree::{KdTree, to_f32};
@@ -170,7 +170,7 @@ pub struct ChangeConfig {
     /// the defaults before pieces on both counts.
     pub piece_min_voxels: u32,
     /// What is left of an object mostly seen gone goes with it: the map's
-    /// voxels above the ground level (`GroundNearby`) that the new
+    /// voxels above the ground level (`GroundLevel::above_nearby`) that the new
     /// session left on the deleted path with no voxel of its own within
     /// τ_c, seen empty or not seen at all, joined through their
     /// 26-neighbours into pieces; in a piece of
@@ -548,13 +548,17 @@ pub fn object_weights(members: &[ObjectMember], new_above: &[[i32; 3]], cfg: &Ch
     }
     let sizes = cfg.piece_min_voxels.max(1) as usize..=cfg.object_max_voxels as usize;
     let g = OBJECT_BOX_MARGIN_VOXELS;
+    // By x, so each piece's box counts only the slice within its x range.
+    let mut by_x = new_above.to_vec();
+    by_x.sort_unstable();
     let verdicts: rustc_hash::FxHashMap<usize, f32> = pieces
         .into_iter()
         .filter(|(_, p)| sizes.contains(&p.n) && !p.ws.is_empty() && p.ws.len() as f64 >= cfg.object_share * p.n as f64)
         .filter(|(_, p)| {
-            let inside =
-                |k: &[i32; 3]| (0..3).all(|a| k[a] >= p.lo[a].saturating_sub(g) && k[a] <= p.hi[a].saturating_add(g));
-            new_above.iter().filter(|k| inside(k)).count() as f64 <= cfg.object_max_new * p.n as f64
+            let (lo, hi) = (p.lo.map(|c| c.saturating_sub(g)), p.hi.map(|c| c.saturating_add(g)));
+            let in_x = &by_x[by_x.partition_point(|k| k[0] < lo[0])..by_x.partition_point(|k| k[0] <= hi[0])];
+            let inside = in_x.iter().filter(|k| (1..3).all(|a| k[a] >= lo[a] && k[a] <= hi[a])).count();
+            inside as f64 <= cfg.object_max_new * p.n as f64
         })
         .map(|(r, mut p)| {
             let k = (p.ws.len() - 1) / 2;
@@ -566,37 +570,9 @@ pub fn object_weights(members: &[ObjectMember], new_above: &[[i32; 3]], cfg: &Ch
 }
 
 /// Columns around a voxel whose lowest occupied voxel sets its ground
-/// level for [`ChangeConfig::object_share`] (5: a metre each way at 0.2 m).
+/// level for [`ChangeConfig::object_share`] (5: a metre each way at 0.2 m;
+/// `GroundLevel::above_nearby`).
 const GROUND_NEARBY_VOXELS: i32 = 5;
-
-/// The ground level for [`ChangeConfig::object_share`]: the lowest occupied
-/// key z among the columns within [`GROUND_NEARBY_VOXELS`], plus
-/// `GROUND_BAND_VOXELS`. Not `evidence::ground`'s own column: under a pipe
-/// stack or a pallet no session saw the ground, and the object's bottom is
-/// its column's lowest voxel; the ground seen beside it is the level.
-struct GroundNearby(rustc_hash::FxHashMap<(i32, i32), i32>);
-
-impl GroundNearby {
-    fn from_keys<'a>(keys: impl IntoIterator<Item = &'a u64>) -> GroundNearby {
-        let mut lowest: rustc_hash::FxHashMap<(i32, i32), i32> = rustc_hash::FxHashMap::default();
-        for &k in keys {
-            let [x, y, z] = unpack(k).0;
-            lowest.entry((x, y)).and_modify(|low| *low = (*low).min(z)).or_insert(z);
-        }
-        GroundNearby(lowest)
-    }
-
-    /// Whether voxel `k` lies above the ground level near it (`true` with
-    /// no occupied column near).
-    fn above(&self, k: &[i32; 3]) -> bool {
-        let r = GROUND_NEARBY_VOXELS;
-        let low = (-r..=r)
-            .flat_map(|dy| (-r..=r).map(move |dx| (dx, dy)))
-            .filter_map(|(dx, dy)| self.0.get(&(k[0].saturating_add(dx), k[1].saturating_add(dy))))
-            .min();
-        low.is_none_or(|&low| k[2] > low.saturating_add(GROUND_BAND_VOXELS))
-    }
-}
 
 /// Sorted packed keys with a lookup, for neighbourhood queries.
 struct KeySet<'a>(&'a [u64]);
@@ -670,12 +646,16 @@ pub fn update_map(
     // it freed the voxel.
     let freed: Vec<Option<(u32, f32)>> =
         map.voxels.par_iter().map(|x| pack(x.key).and_then(free_at).filter(|&(n_free, _)| n_free > 0)).collect();
+    // The new session's voxel nearest each L voxel within τ_c, and the
+    // match: that voxel where it explains the L voxel.
+    let nearest: Vec<Option<usize>> = map.voxels.par_iter().map(|x| n_set.nearest_within(x.key, r)).collect();
     let mut l_match: Vec<Option<usize>> = map
         .voxels
         .par_iter()
         .zip(&freed)
-        .map(|(x, f)| {
-            let m = n_set.nearest_within(x.key, r)?;
+        .zip(&nearest)
+        .map(|((x, f), &m)| {
+            let m = m?;
             if cfg.off_surface_m <= 0.0 || new[m].key == x.key {
                 return Some(m);
             }
@@ -708,18 +688,18 @@ pub fn update_map(
     // What is left of an object mostly seen gone goes with it
     // (`object_share`): the session's strong free evidence, as the lower
     // median of its pieces above the ground level, for the rest of them.
-    let mut inferred: Vec<f32> = vec![0.0; map.len()];
+    // A voxel the session did not free has weight 0 until then.
     if cfg.object_share > 0.0 && !first {
-        let ground = GroundNearby::from_keys(l_keys.iter().chain(&n_keys));
+        let ground = GroundLevel::from_keys(l_keys.iter().chain(&n_keys));
+        let above = |k: &[i32; 3]| ground.above_nearby(k, GROUND_NEARBY_VOXELS);
         let strong = cfg.strong_weight() as f32;
         let members: Vec<(u64, usize)> = (0..map.len())
-            .filter(|&i| l_match[i].is_none() && ground.above(&map.voxels[i].key.0))
-            .filter(|&i| n_set.nearest_within(map.voxels[i].key, r).is_none())
+            .filter(|&i| l_match[i].is_none() && nearest[i].is_none() && above(&map.voxels[i].key.0))
             .filter_map(|i| Some((pack(map.voxels[i].key)?, i)))
             .collect();
         // The new session's voxels above the ground level: the ground it
         // hits around a removed object lies beside every object.
-        let new_above: Vec<[i32; 3]> = n_keys.iter().map(|&k| unpack(k).0).filter(|k| ground.above(k)).collect();
+        let new_above: Vec<[i32; 3]> = n_keys.iter().map(|&k| unpack(k).0).filter(|k| above(k)).collect();
         let rows: Vec<ObjectMember> = members
             .iter()
             .map(|&(key, i)| ObjectMember { key, strong: freed[i].is_some() && weight[i] >= strong, w: weight[i] })
@@ -727,11 +707,7 @@ pub fn update_map(
         let objects = object_weights(&rows, &new_above, cfg);
         for (&(_, i), m) in members.iter().zip(objects) {
             if let Some(m) = m {
-                if freed[i].is_some() {
-                    weight[i] = weight[i].max(m);
-                } else {
-                    inferred[i] = m;
-                }
+                weight[i] = weight[i].max(m);
             }
         }
     }
@@ -759,8 +735,9 @@ pub fn update_map(
                 Category::DeletedOverlap
             }
             None => {
-                if inferred[i] > 0.0 {
-                    y.eps_g = clamp(bayes(x.eps_g as f64, deleted_factor(inferred[i])));
+                // Unseen, but part of an object mostly seen gone.
+                if weight[i] > 0.0 {
+                    y.eps_g = clamp(bayes(x.eps_g as f64, deleted_factor(weight[i])));
                 }
                 Category::DeletedNonOverlap
             }

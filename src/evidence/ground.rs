@@ -125,6 +125,21 @@ impl GroundLevel {
         self.lowest(k).is_some_and(|low| k[2] <= low)
     }
 
+    /// Whether voxel `k` lies above the ground level of the columns within
+    /// `r` of its own: above the lowest occupied key z among them plus
+    /// [`GROUND_BAND_VOXELS`]; `true` when none of them holds a voxel.
+    ///
+    /// For what stands on ground no session saw beneath it (a pipe stack, a
+    /// pallet), whose own column's lowest voxel is the object's bottom: the
+    /// ground seen beside it sets the level.
+    pub fn above_nearby(&self, k: &[i32; 3], r: i32) -> bool {
+        let low = (-r..=r)
+            .flat_map(|dy| (-r..=r).map(move |dx| (dx, dy)))
+            .filter_map(|(dx, dy)| self.lowest(&[k[0].saturating_add(dx), k[1].saturating_add(dy), k[2]]))
+            .min();
+        low.is_none_or(|low| k[2] > low.saturating_add(GROUND_BAND_VOXELS))
+    }
+
     pub fn columns(&self) -> usize {
         match &self.columns {
             Columns::Dense { count, .. } => *count,
@@ -174,5 +189,31 @@ mod tests {
         assert!(g.is_lowest(&[5000, 4000, 1]) && !g.is_lowest(&[5000, 4000, 2]));
         assert_eq!(d.at_ground(&[-1, 2, 1]), Some(true));
         assert_eq!(d.at_ground(&[1, 0, 0]), None, "inside the grid, no point in the column");
+        for k in [[1, 1, -2], [1, 1, 0], [1, 2, 0], [1, 2, 1], [2, 0, -1], [3, 0, 0], [6, 6, 0]] {
+            assert_eq!(g.above_nearby(&k, 2), d.above_nearby(&k, 2), "{k:?}");
+        }
+        assert!(!g.above_nearby(&[1, 1, -1], 2) && g.above_nearby(&[1, 1, 0], 2), "(0, 0) has -2 within 2");
+        assert!(!g.above_nearby(&[5003, 4000, 2], 3) && g.above_nearby(&[5003, 4000, 3], 3));
+    }
+
+    #[test]
+    fn the_ground_nearby_is_the_lowest_column_within_reach() {
+        // A 3 x 3 box standing from z = 4 on ground seen at z = 0 two
+        // columns off; its own columns' lowest voxel is its bottom.
+        let mut keys: Vec<[i32; 3]> = vec![[-2, 0, 0], [9, 9, -7]];
+        for x in 0..3 {
+            for y in 0..3 {
+                keys.extend((4..7).map(|z| [x, y, z]));
+            }
+        }
+        let packed: Vec<u64> = keys.iter().map(|&k| pack(VoxelKey(k)).unwrap()).collect();
+        let g = GroundLevel::from_keys(&packed);
+        assert_eq!(g.at_ground(&[1, 1, 4]), Some(true), "its own column: the bottom is its ground");
+        assert!(g.above_nearby(&[1, 1, 4], 3), "ground seen 3 columns off");
+        assert!(!g.above_nearby(&[1, 1, 4], 1), "no lower column within 1: its own bottom");
+        assert!(!g.above_nearby(&[-2, 0, 1], 3), "the band above the ground");
+        assert!(g.above_nearby(&[-2, 0, 2], 3));
+        assert!(g.above_nearby(&[30, 30, -100], 5), "no column within reach");
+        assert!(!g.above_nearby(&[8, 8, -6], 1), "reach is per axis: (9, 9) is within 1 of (8, 8)");
     }
 }
