@@ -169,7 +169,7 @@ pub struct ChangeConfig {
     /// layers): VLP-16 99.40 / 14.38 %, HDL-64E 99.56 / 6.21 %, better than
     /// the defaults before pieces on both counts.
     pub piece_min_voxels: u32,
-    /// What is left of an object mostly seen gone goes with it: the map's
+    /// What is left of an object partly seen gone goes with it: the map's
     /// voxels above the ground level (`GroundLevel::above_nearby`) that the new
     /// session left on the deleted path with no voxel of its own within
     /// τ_c, seen empty or not seen at all, joined through their
@@ -653,25 +653,23 @@ pub fn update_map(
     // it freed the voxel.
     let freed: Vec<Option<(u32, f32)>> =
         map.voxels.par_iter().map(|x| pack(x.key).and_then(free_at).filter(|&(n_free, _)| n_free > 0)).collect();
-    // The new session's voxel nearest each L voxel within τ_c, and the
-    // match: that voxel where it explains the L voxel.
-    let nearest: Vec<Option<usize>> = map.voxels.par_iter().map(|x| n_set.nearest_within(x.key, r)).collect();
-    let mut l_match: Vec<Option<usize>> = map
+    // Each L voxel's match, the new session's voxel nearest it within τ_c
+    // where that explains it, and whether there is any within τ_c.
+    let (mut l_match, near): (Vec<Option<usize>>, Vec<bool>) = map
         .voxels
         .par_iter()
         .zip(&freed)
-        .zip(&nearest)
-        .map(|((x, f), &m)| {
-            let m = m?;
+        .map(|(x, f)| {
+            let Some(m) = n_set.nearest_within(x.key, r) else { return (None, false) };
             if cfg.off_surface_m <= 0.0 || new[m].key == x.key {
-                return Some(m);
+                return (Some(m), true);
             }
             // Only a voxel the new session freed can be unexplained.
             let explained = f.is_none()
                 || x.key.neighbours(r).filter_map(|(_, k)| pack(k).and_then(|k| n_set.find(k))).any(|j| explains(x, j));
-            explained.then_some(m)
+            (explained.then_some(m), true)
         })
-        .collect();
+        .unzip();
     // Pieces of freed space, judged whole (`piece_min_voxels`): every freed
     // L voxel the session did not hit itself.
     let mut weight: Vec<f32> = freed.iter().map(|f| f.map_or(0.0, |(_, w)| w)).collect();
@@ -692,7 +690,7 @@ pub fn update_map(
             }
         }
     }
-    // What is left of an object mostly seen gone goes with it
+    // What is left of an object partly seen gone goes with it
     // (`object_share`): the session's strong free evidence, as the lower
     // median of its pieces above the ground level, for the rest of them.
     // A voxel the session did not free has weight 0 until then.
@@ -701,12 +699,13 @@ pub fn update_map(
         let above = |k: &[i32; 3]| ground.above_nearby(k, GROUND_NEARBY_VOXELS);
         let strong = cfg.strong_weight() as f32;
         let members: Vec<(u64, usize)> = (0..map.len())
-            .filter(|&i| l_match[i].is_none() && nearest[i].is_none() && above(&map.voxels[i].key.0))
+            .into_par_iter()
+            .filter(|&i| l_match[i].is_none() && !near[i] && above(&map.voxels[i].key.0))
             .filter_map(|i| Some((pack(map.voxels[i].key)?, i)))
             .collect();
         // The new session's voxels above the ground level: the ground it
         // hits around a removed object lies beside every object.
-        let new_above: Vec<[i32; 3]> = n_keys.iter().map(|&k| unpack(k).0).filter(|k| above(k)).collect();
+        let new_above: Vec<[i32; 3]> = n_keys.par_iter().map(|&k| unpack(k).0).filter(|k| above(k)).collect();
         let rows: Vec<ObjectMember> = members
             .iter()
             .map(|&(key, i)| ObjectMember { key, strong: freed[i].is_some() && weight[i] >= strong, w: weight[i] })
@@ -742,7 +741,7 @@ pub fn update_map(
                 Category::DeletedOverlap
             }
             None => {
-                // Unseen, but part of an object mostly seen gone.
+                // Unseen, but part of an object seen gone (`object_share`).
                 if weight[i] > 0.0 {
                     y.eps_g = clamp(bayes(x.eps_g as f64, deleted_factor(weight[i])));
                 }
