@@ -323,6 +323,8 @@ fn bad_evidence_settings_and_dor_inputs() {
     std::fs::write(&object_max, "[change]\nobject_max_voxels = 0\n").unwrap();
     let object_new = t.path().join("object_new.toml");
     std::fs::write(&object_new, "[change]\nobject_max_new = -1.0\n").unwrap();
+    let object_sure = t.path().join("object_sure.toml");
+    std::fs::write(&object_sure, "[change]\nobject_sure_share = 1.2\n").unwrap();
     for (cfg, fragment) in [
         (&model, "octomap"),
         (&clearance, "free_clearance_m"),
@@ -352,6 +354,7 @@ fn bad_evidence_settings_and_dor_inputs() {
         (&object, "object_share"),
         (&object_max, "object_max_voxels"),
         (&object_new, "object_max_new"),
+        (&object_sure, "object_sure_share"),
     ] {
         let o = run(&["--config", cfg.to_str().unwrap(), "ingest", st, dir]);
         assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));

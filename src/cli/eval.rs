@@ -14,10 +14,13 @@
 use super::output::thousands;
 use super::output::{print_json, print_table};
 use super::{Ctx, Format};
-use crate::eval::changes::{ChangeEvalConfig, ChangesReport, Fraction, Placement, changes_report};
+use crate::eval::changes::{
+    ChangeEvalConfig, ChangesReport, Fraction, Placement, changes_report, write_removed_voxels,
+};
 use crate::eval::dor::render_table;
 use crate::eval::{AlignReport, align_report, dor_report};
 use crate::store::Store;
+use anyhow::Context;
 use clap::{Args, Subcommand};
 use std::path::PathBuf;
 
@@ -46,6 +49,12 @@ pub struct ChangesArgs {
     /// Umeyama fit of all keyframes (alignment errors included).
     #[arg(long, default_value = "owner", value_parser = ["owner", "rigid"])]
     pub placement: String,
+    /// Also write every voxel of a removed object (metric 2) as CSV: its
+    /// object, ε_g, category, sessions, whether some session saw it free or
+    /// had it in view, its height above the object's bottom, and its place
+    /// in the truth's and the store's frame. For finding out what stayed.
+    #[arg(long, value_name = "FILE.csv")]
+    pub removed_voxels: Option<PathBuf>,
 }
 
 #[derive(Debug, Args)]
@@ -111,6 +120,14 @@ pub fn run(ctx: &Ctx, cmd: EvalCommand) -> anyhow::Result<()> {
                 ..ChangeEvalConfig::default()
             };
             let report = changes_report(&store, &a.gt, &cfg)?;
+            if let Some(path) = &a.removed_voxels {
+                let write = || -> std::io::Result<()> {
+                    let mut out = std::io::BufWriter::new(std::fs::File::create(path)?);
+                    write_removed_voxels(&report.removed_voxels, &mut out)?;
+                    std::io::Write::flush(&mut out)
+                };
+                write().with_context(|| format!("cannot write {}", path.display()))?;
+            }
             match ctx.format {
                 Format::Json => print_json(&report)?,
                 _ => print_changes(&report),

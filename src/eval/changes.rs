@@ -92,7 +92,7 @@
 
 use super::EvalError;
 use super::align::{rmse_after, umeyama};
-use crate::change::{Category, SessionChanges};
+use crate::change::{Category, MapVoxel, SessionChanges};
 use crate::geometry::Pose;
 use crate::sensor::Fov;
 use crate::sim::{GroundTruth, Shape, read_ground_truth};
@@ -336,6 +336,21 @@ pub struct RemovedObject {
     pub categories: Vec<CategoryCount>,
 }
 
+/// One voxel of a removed object (metric 2), for diagnosis.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RemovedVoxel {
+    /// Index in the voxels scored.
+    pub voxel: usize,
+    pub object: u32,
+    pub class: String,
+    /// The last session of the map the object was present in.
+    pub last_present: usize,
+    /// Centroid height above the object's box bottom, m.
+    pub height_m: f64,
+    /// Whether a session after `last_present` had it in view ([`SensorView`]).
+    pub in_view_later: Option<bool>,
+}
+
 /// One appeared object (metric 3).
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct AppearedObject {
@@ -380,6 +395,10 @@ pub struct ChangeScores {
     pub removed_by_category: Vec<CategoryCount>,
     /// 2: each removed object's voxels, most left static first.
     pub removed_by_object: Vec<RemovedObject>,
+    /// 2: every voxel counted, in `voxels` order (not in the JSON; `seam
+    /// eval changes --removed-voxels FILE` writes it with the map's fields).
+    #[serde(skip)]
+    pub removed_voxels: Vec<RemovedVoxel>,
     pub removed_objects: usize,
     /// 3: present / seen appeared objects.
     pub appeared_present: Fraction,
@@ -564,6 +583,9 @@ struct Acc {
     /// by category after the last session; metric 2's totals and categories
     /// are their sums.
     removed_by_object: FxHashMap<u32, [[u64; 2]; 6]>,
+    /// Each removed-object voxel of metric 2: its index in `voxels`, the
+    /// object's index and whether a later session had it in view.
+    removed_voxels: Vec<(usize, u32, Option<bool>)>,
     /// Per case: region voxels that decide whether it is scored.
     case_voxels: Vec<u64>,
     /// Per case: of those, the ones its session's sensor had in view.
@@ -606,6 +628,7 @@ impl Acc {
                 a[1] += b[1];
             }
         }
+        self.removed_voxels.extend(o.removed_voxels);
         for (mine, theirs) in [(&mut self.case_voxels, o.case_voxels), (&mut self.case_in_view, o.case_in_view)] {
             if mine.len() < theirs.len() {
                 mine.resize(theirs.len(), 0);
@@ -674,9 +697,10 @@ pub fn score(
     }
 
     let empty = || Acc { case_voxels: vec![0; cases.len()], case_in_view: vec![0; cases.len()], ..Acc::default() };
-    let acc = voxels
+    let mut acc = voxels
         .par_iter()
-        .fold(empty, |mut acc, v| {
+        .enumerate()
+        .fold(empty, |mut acc, (i, v)| {
             let s = u64::from(v.is_static);
             acc.total += 1;
             acc.static_total += s;
@@ -706,10 +730,12 @@ pub fn score(
                     acc.removed_seen_free[0] += 1;
                     acc.removed_seen_free[1] += s;
                 }
-                if seen_later(o, v.xyz) == Some(true) {
+                let later = seen_later(o, v.xyz);
+                if later == Some(true) {
                     acc.removed_in_view[0] += 1;
                     acc.removed_in_view[1] += s;
                 }
+                acc.removed_voxels.push((i, o, later));
             }
             if l.of.iter().any(|&o| appeared_final[o as usize]) && scene.free_of_present(&l, first) {
                 acc.appeared[0] += 1;
@@ -857,6 +883,19 @@ pub fn score(
         });
     }
     removed_by_object.sort_by(|a, b| b.static_voxels.cmp(&a.static_voxels).then_with(|| a.object.cmp(&b.object)));
+    acc.removed_voxels.sort_unstable_by_key(|r| r.0);
+    let removed_voxels = acc
+        .removed_voxels
+        .iter()
+        .map(|&(i, o, in_view_later)| RemovedVoxel {
+            voxel: i,
+            object: objects[o as usize].id,
+            class: objects[o as usize].class.clone(),
+            last_present: last_present[o as usize].map_or(0, |k| sessions[k]),
+            height_m: voxels[i].xyz[2] - objects[o as usize].bottom_z,
+            in_view_later,
+        })
+        .collect();
     let mut removed_by_class = class_counts(classes);
     removed_by_class.sort_by(|a, b| b.static_voxels.cmp(&a.static_voxels).then_with(|| a.class.cmp(&b.class)));
     ChangeScores {
@@ -880,6 +919,7 @@ pub fn score(
         removed_by_class,
         removed_by_category: by_category(&removed_categories),
         removed_by_object,
+        removed_voxels,
         removed_objects: removed_final.iter().filter(|&&r| r).count(),
         appeared_present: Fraction::new(appeared.iter().filter(|a| a.present).count() as u64, seen),
         appeared_static_voxels: Fraction::new(acc.appeared[1], acc.appeared[0]),
@@ -959,6 +999,60 @@ pub struct ChangesReport {
     pub settings: ChangeEvalConfig,
     pub goals: Vec<Goal>,
     pub scores: ChangeScores,
+    /// Metric 2's voxels with their map fields (not in the JSON; see
+    /// [`write_removed_voxels`]).
+    #[serde(skip)]
+    pub removed_voxels: Vec<RemovedVoxelRow>,
+}
+
+/// A removed object's voxel as the map holds it and as the truth places it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RemovedVoxelRow {
+    pub of: RemovedVoxel,
+    /// Where the truth's frame puts its centroid, m.
+    pub truth_xyz_m: [f64; 3],
+    pub voxel: MapVoxel,
+    /// Simulator numbers of its first and last sessions.
+    pub first_session: usize,
+    pub last_seen_session: usize,
+    pub is_static: bool,
+    /// Some session saw it free (a `deleted_overlap` event).
+    pub seen_free: bool,
+}
+
+/// Writes `rows` as CSV, one voxel per line, to find out why a removed
+/// object's voxels stayed in the static map.
+pub fn write_removed_voxels(rows: &[RemovedVoxelRow], out: &mut impl std::io::Write) -> std::io::Result<()> {
+    writeln!(
+        out,
+        "voxel_id,object,class,last_present,static,eps_g,eps_l,category,category_session,first_session,\
+         last_seen_session,seen_free,in_view_later,height_m,truth_x_m,truth_y_m,truth_z_m,x_m,y_m,z_m,points"
+    )?;
+    for r in rows {
+        let v = &r.voxel;
+        let [tx, ty, tz] = r.truth_xyz_m;
+        let [x, y, z] = v.xyz_m;
+        writeln!(
+            out,
+            "{},{},{},{},{},{:.4},{:.4},{},{},{},{},{},{},{:.3},{tx:.3},{ty:.3},{tz:.3},{x:.3},{y:.3},{z:.3},{}",
+            v.voxel_id,
+            r.of.object,
+            r.of.class,
+            r.of.last_present,
+            r.is_static,
+            v.eps_g,
+            v.eps_l,
+            v.category.as_str(),
+            v.category_session,
+            r.first_session,
+            r.last_seen_session,
+            r.seen_free,
+            r.of.in_view_later.map_or(String::new(), |b| b.to_string()),
+            r.of.height_m,
+            v.points,
+        )?;
+    }
+    Ok(())
 }
 
 /// The simulator session of each stored session (in store order): the one
@@ -1189,6 +1283,22 @@ pub fn changes_report(store: &Store, gt_dir: &Path, cfg: &ChangeEvalConfig) -> R
             .min_by(f64::total_cmp);
     }
     let last_session = name_of.get(&state.session_id.0).copied().unwrap_or_default().to_string();
+    let removed_voxels = scores
+        .removed_voxels
+        .iter()
+        .map(|r| {
+            let (m, v) = (&map.voxels[r.voxel], &voxels[r.voxel]);
+            RemovedVoxelRow {
+                of: r.clone(),
+                truth_xyz_m: v.xyz,
+                voxel: *m,
+                first_session: v.first_session,
+                last_seen_session: number_of.get(&m.last_seen_session).copied().unwrap_or(0),
+                is_static: v.is_static,
+                seen_free: v.seen_free,
+            }
+        })
+        .collect();
     Ok(ChangesReport {
         voxel_m: state.voxel_m,
         graph_version: state.graph_version,
@@ -1200,6 +1310,7 @@ pub fn changes_report(store: &Store, gt_dir: &Path, cfg: &ChangeEvalConfig) -> R
         settings: cfg.clone(),
         goals: goals(&scores),
         scores,
+        removed_voxels,
     })
 }
 
@@ -1317,6 +1428,13 @@ mod tests {
         let o = &s.removed_by_object;
         assert_eq!((o.len(), o[0].object, o[0].last_present, o[0].voxels, o[0].static_voxels), (1, 1, 1, gone, 1));
         assert_eq!(o[0].categories, *c);
+        // The per-voxel list holds exactly those voxels, in order, with the
+        // height above the car's bottom (0 m): the leftover's centre is 0.5 m up.
+        let listed: Vec<usize> = s.removed_voxels.iter().map(|r| r.voxel).collect();
+        assert_eq!(listed, (0..gone as usize).collect::<Vec<_>>());
+        let r = &s.removed_voxels[0];
+        assert_eq!((r.object, r.class.as_str(), r.last_present, r.in_view_later), (1, "container", 1, None));
+        assert!((r.height_m - 0.5).abs() < 1e-9, "{}", r.height_m);
     }
 
     /// A spinning sensor sees its elevation band within range; a forward
