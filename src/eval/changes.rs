@@ -1012,9 +1012,11 @@ pub struct RemovedVoxelRow {
     /// Where the truth's frame puts its centroid, m.
     pub truth_xyz_m: [f64; 3],
     pub voxel: MapVoxel,
-    /// Simulator numbers of its first and last sessions.
+    /// Simulator numbers of its first and last sessions and of the session
+    /// that set its category (0: not a session of the truth).
     pub first_session: usize,
     pub last_seen_session: usize,
+    pub category_session: usize,
     pub is_static: bool,
     /// Some session saw it free (a `deleted_overlap` event).
     pub seen_free: bool,
@@ -1043,7 +1045,7 @@ pub fn write_removed_voxels(rows: &[RemovedVoxelRow], out: &mut impl std::io::Wr
             v.eps_g,
             v.eps_l,
             v.category.as_str(),
-            v.category_session,
+            r.category_session,
             r.first_session,
             r.last_seen_session,
             r.seen_free,
@@ -1294,6 +1296,7 @@ pub fn changes_report(store: &Store, gt_dir: &Path, cfg: &ChangeEvalConfig) -> R
                 voxel: *m,
                 first_session: v.first_session,
                 last_seen_session: number_of.get(&m.last_seen_session).copied().unwrap_or(0),
+                category_session: number_of.get(&m.category_session).copied().unwrap_or(0),
                 is_static: v.is_static,
                 seen_free: v.seen_free,
             }
