@@ -325,6 +325,10 @@ fn bad_evidence_settings_and_dor_inputs() {
     std::fs::write(&object_new, "[change]\nobject_max_new = -1.0\n").unwrap();
     let object_sure = t.path().join("object_sure.toml");
     std::fs::write(&object_sure, "[change]\nobject_sure_share = 1.2\n").unwrap();
+    let piece_gone = t.path().join("piece_gone.toml");
+    std::fs::write(&piece_gone, "[change]\npiece_gone_share = -0.5\n").unwrap();
+    let piece_gone_w = t.path().join("piece_gone_w.toml");
+    std::fs::write(&piece_gone_w, "[change]\npiece_gone_min_w = 2.0\n").unwrap();
     for (cfg, fragment) in [
         (&model, "octomap"),
         (&clearance, "free_clearance_m"),
@@ -355,6 +359,8 @@ fn bad_evidence_settings_and_dor_inputs() {
         (&object_max, "object_max_voxels"),
         (&object_new, "object_max_new"),
         (&object_sure, "object_sure_share"),
+        (&piece_gone, "piece_gone_share"),
+        (&piece_gone_w, "piece_gone_min_w"),
     ] {
         let o = run(&["--config", cfg.to_str().unwrap(), "ingest", st, dir]);
         assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));

@@ -80,7 +80,8 @@ fn sessions_are_aligned_jointly_within_a_decimetre() {
         assert!(met, "{name}: {value:.4} misses its goal: {}", report["goals"]);
     }
     // Seeing a removed object's space free must lower what is left of it:
-    // 3.34 % here (4 × 150 keyframes) with `[change] object_sure_share`,
+    // 3.24 % here (4 × 150 keyframes) with `[change] piece_gone_share`, 3.34 %
+    // with `object_sure_share` alone,
     // 4.90 % before it, with the local loop edges and the
     // map's ground needing crossing, 6.10 % before them; 14.2 % before the
     // pieces, 17.3 % when first written, before `[change] off_surface_m`
