@@ -737,7 +737,8 @@ pub fn update_map(
     // L voxel the session did not hit itself.
     let mut weight: Vec<f32> = freed.iter().map(|f| f.map_or(0.0, |(_, w)| w)).collect();
     // The ground level of the map and the session, for the steps below.
-    let ground = (!first && (cfg.object_share > 0.0 || cfg.piece_gone_share > 0.0))
+    let piece_gone = cfg.piece_min_voxels > 0 && cfg.piece_gone_share > 0.0;
+    let ground = (!first && (cfg.object_share > 0.0 || piece_gone))
         .then(|| GroundLevel::from_keys(l_keys.iter().chain(&n_keys)));
     let above = |k: &[i32; 3]| ground.as_ref().is_some_and(|g| g.above_nearby(k, GROUND_NEARBY_VOXELS));
     if cfg.piece_min_voxels > 0 && !first {

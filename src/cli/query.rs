@@ -134,9 +134,7 @@ pub(super) fn print_result_table(ctx: &Ctx, result: &QueryResult) -> anyhow::Res
 /// Comma-separated with a header; reals exact; fields with `,`, `"` or a
 /// line break quoted.
 fn csv(r: &QueryResult) -> String {
-    let quote = |s: &str| {
-        if s.contains([',', '"', '\n', '\r']) { format!("\"{}\"", s.replace('"', "\"\"")) } else { s.to_string() }
-    };
+    let quote = |s: &str| crate::text::csv_field(s).into_owned();
     let mut out = r.columns.iter().map(|c| quote(&c.name)).collect::<Vec<_>>().join(",");
     out.push('\n');
     for i in 0..r.rows.len() {

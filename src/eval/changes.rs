@@ -1009,17 +1009,13 @@ pub struct ChangesReport {
 #[derive(Debug, Clone, PartialEq)]
 pub struct RemovedVoxelRow {
     pub of: RemovedVoxel,
-    /// Where the truth's frame puts its centroid, m.
-    pub truth_xyz_m: [f64; 3],
+    /// As scored: in the truth's frame, static or not, first session.
+    pub scored: EvalVoxel,
     pub voxel: MapVoxel,
-    /// Simulator numbers of its first and last sessions and of the session
-    /// that set its category (0: not a session of the truth).
-    pub first_session: usize,
+    /// Simulator numbers of its last session and of the session that set
+    /// its category (0: not a session of the truth).
     pub last_seen_session: usize,
     pub category_session: usize,
-    pub is_static: bool,
-    /// Some session saw it free (a `deleted_overlap` event).
-    pub seen_free: bool,
 }
 
 /// Writes `rows` as CSV, one voxel per line, to find out why a removed
@@ -1032,23 +1028,23 @@ pub fn write_removed_voxels(rows: &[RemovedVoxelRow], out: &mut impl std::io::Wr
     )?;
     for r in rows {
         let v = &r.voxel;
-        let [tx, ty, tz] = r.truth_xyz_m;
+        let [tx, ty, tz] = r.scored.xyz;
         let [x, y, z] = v.xyz_m;
         writeln!(
             out,
             "{},{},{},{},{},{:.4},{:.4},{},{},{},{},{},{},{:.3},{tx:.3},{ty:.3},{tz:.3},{x:.3},{y:.3},{z:.3},{}",
             v.voxel_id,
             r.of.object,
-            r.of.class,
+            crate::text::csv_field(&r.of.class),
             r.of.last_present,
-            r.is_static,
+            r.scored.is_static,
             v.eps_g,
             v.eps_l,
             v.category.as_str(),
             r.category_session,
-            r.first_session,
+            r.scored.first_session,
             r.last_seen_session,
-            r.seen_free,
+            r.scored.seen_free,
             r.of.in_view_later.map_or(String::new(), |b| b.to_string()),
             r.of.height_m,
             v.points,
@@ -1289,16 +1285,13 @@ pub fn changes_report(store: &Store, gt_dir: &Path, cfg: &ChangeEvalConfig) -> R
         .removed_voxels
         .iter()
         .map(|r| {
-            let (m, v) = (&map.voxels[r.voxel], &voxels[r.voxel]);
+            let m = &map.voxels[r.voxel];
             RemovedVoxelRow {
                 of: r.clone(),
-                truth_xyz_m: v.xyz,
+                scored: voxels[r.voxel],
                 voxel: *m,
-                first_session: v.first_session,
                 last_seen_session: number_of.get(&m.last_seen_session).copied().unwrap_or(0),
                 category_session: number_of.get(&m.category_session).copied().unwrap_or(0),
-                is_static: v.is_static,
-                seen_free: v.seen_free,
             }
         })
         .collect();
