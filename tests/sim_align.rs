@@ -102,18 +102,45 @@ fn sessions_are_aligned_jointly_within_a_decimetre() {
     }
     // `--removed-voxels` lists every voxel that metric counts, one per line,
     // and marks as static the ones it counts as left.
+    // `--lost-voxels` lists the permanent-structure voxels missing from the
+    // static map, none of them static.
     let csv_path = tmp.path().join("removed.csv");
-    let o =
-        run(&["eval", "changes", st, "--gt", sim.to_str().unwrap(), "--removed-voxels", csv_path.to_str().unwrap()]);
+    let lost_path = tmp.path().join("lost.csv");
+    let o = run(&[
+        "eval",
+        "changes",
+        st,
+        "--gt",
+        sim.to_str().unwrap(),
+        "--removed-voxels",
+        csv_path.to_str().unwrap(),
+        "--lost-voxels",
+        lost_path.to_str().unwrap(),
+    ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let csv = std::fs::read_to_string(&csv_path).unwrap();
-    let mut lines = csv.lines();
-    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
-    let static_col = header.iter().position(|c| *c == "static").unwrap();
-    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    let rows_of = |path: &std::path::Path| -> (Vec<String>, Vec<Vec<String>>) {
+        let csv = std::fs::read_to_string(path).unwrap();
+        let mut lines = csv.lines();
+        let header = lines.next().unwrap().split(',').map(str::to_string).collect();
+        (header, lines.map(|l| l.split(',').map(str::to_string).collect()).collect())
+    };
+    let (header, rows) = rows_of(&csv_path);
+    let static_col = header.iter().position(|c| c == "static").unwrap();
     assert_eq!(rows.len() as u64, total("removed_static"));
     let left_n = rows.iter().filter(|r| r[static_col] == "true").count() as u64;
     assert_eq!(left_n, s["removed_static"]["hits"].as_u64().unwrap());
+    let (header, lost) = rows_of(&lost_path);
+    let static_col = header.iter().position(|c| c == "static").unwrap();
+    let permanent = &s["permanent_static"];
+    let lost_n = permanent["total"].as_u64().unwrap() - permanent["hits"].as_u64().unwrap();
+    assert_eq!(lost.len() as u64, lost_n);
+    assert!(lost.iter().all(|r| r[static_col] == "false"));
+    // A CSV that cannot be written is an error naming it, before any report.
+    let nowhere = tmp.path().join("no-such-dir").join("lost.csv");
+    let o = run(&["eval", "changes", st, "--gt", sim.to_str().unwrap(), "--lost-voxels", nowhere.to_str().unwrap()]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains(&format!("cannot write {}", nowhere.display())), "{o:?}");
+    assert!(o.stdout.is_empty(), "{}", String::from_utf8_lossy(&o.stdout));
 }
 
 /// A session that shares nothing with the store is kept, unaligned, with the

@@ -15,7 +15,7 @@ use super::output::thousands;
 use super::output::{print_json, print_table};
 use super::{Ctx, Format};
 use crate::eval::changes::{
-    ChangeEvalConfig, ChangesReport, Fraction, Placement, changes_report, write_removed_voxels,
+    ChangeEvalConfig, ChangesReport, Fraction, Placement, changes_report, write_lost_voxels, write_removed_voxels,
 };
 use crate::eval::dor::render_table;
 use crate::eval::{AlignReport, align_report, dor_report};
@@ -55,6 +55,12 @@ pub struct ChangesArgs {
     /// in the truth's and the store's frame. For finding out what stayed.
     #[arg(long, value_name = "FILE.csv")]
     pub removed_voxels: Option<PathBuf>,
+    /// Also write every permanent-structure voxel missing from the static
+    /// map (metric 1) as CSV: the permanent object it is near (empty for
+    /// ground), ε_g, category, sessions and its place in both frames. For
+    /// finding out what a rule paid.
+    #[arg(long, value_name = "FILE.csv")]
+    pub lost_voxels: Option<PathBuf>,
 }
 
 #[derive(Debug, Args)]
@@ -84,6 +90,20 @@ pub struct AlignArgs {
     /// Also re-solve every ingest step with fixed, session and submap anchors.
     #[arg(long)]
     pub compare_anchors: bool,
+}
+
+/// Writes a CSV to `path` when one is given; the error names the file.
+fn write_csv(
+    path: Option<&std::path::Path>,
+    rows: impl FnOnce(&mut std::io::BufWriter<std::fs::File>) -> std::io::Result<()>,
+) -> anyhow::Result<()> {
+    let Some(path) = path else { return Ok(()) };
+    let write = || -> std::io::Result<()> {
+        let mut out = std::io::BufWriter::new(std::fs::File::create(path)?);
+        rows(&mut out)?;
+        std::io::Write::flush(&mut out)
+    };
+    write().with_context(|| format!("cannot write {}", path.display()))
 }
 
 pub fn run(ctx: &Ctx, cmd: EvalCommand) -> anyhow::Result<()> {
@@ -120,14 +140,8 @@ pub fn run(ctx: &Ctx, cmd: EvalCommand) -> anyhow::Result<()> {
                 ..ChangeEvalConfig::default()
             };
             let report = changes_report(&store, &a.gt, &cfg)?;
-            if let Some(path) = &a.removed_voxels {
-                let write = || -> std::io::Result<()> {
-                    let mut out = std::io::BufWriter::new(std::fs::File::create(path)?);
-                    write_removed_voxels(&report.removed_voxels, &mut out)?;
-                    std::io::Write::flush(&mut out)
-                };
-                write().with_context(|| format!("cannot write {}", path.display()))?;
-            }
+            write_csv(a.removed_voxels.as_deref(), |out| write_removed_voxels(&report.removed_voxels, out))?;
+            write_csv(a.lost_voxels.as_deref(), |out| write_lost_voxels(&report.lost_voxels, out))?;
             match ctx.format {
                 Format::Json => print_json(&report)?,
                 _ => print_changes(&report),

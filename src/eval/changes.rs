@@ -351,6 +351,19 @@ pub struct RemovedVoxel {
     pub in_view_later: Option<bool>,
 }
 
+/// One permanent-structure voxel the static map lost (metric 1), for
+/// diagnosis: what a rule paid for the leftovers it took.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LostVoxel {
+    /// Index in the voxels scored.
+    pub voxel: usize,
+    /// The permanent object it is near (the lowest id), `None` for ground
+    /// and what the simulator does not model as objects.
+    pub object: Option<u32>,
+    /// That object's class, `ground` without one.
+    pub class: String,
+}
+
 /// One appeared object (metric 3).
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct AppearedObject {
@@ -399,6 +412,10 @@ pub struct ChangeScores {
     /// eval changes --removed-voxels FILE` writes it with the map's fields).
     #[serde(skip)]
     pub removed_voxels: Vec<RemovedVoxel>,
+    /// 1: every permanent voxel not in the static map, in `voxels` order
+    /// (not in the JSON; `seam eval changes --lost-voxels FILE` writes it).
+    #[serde(skip)]
+    pub lost_voxels: Vec<LostVoxel>,
     pub removed_objects: usize,
     /// 3: present / seen appeared objects.
     pub appeared_present: Fraction,
@@ -586,6 +603,9 @@ struct Acc {
     /// Each removed-object voxel of metric 2: its index in `voxels`, the
     /// object's index and whether a later session had it in view.
     removed_voxels: Vec<(usize, u32, Option<bool>)>,
+    /// Each permanent voxel not static: its index in `voxels` and the
+    /// permanent object it is near (`u32::MAX`: none).
+    lost_voxels: Vec<(usize, u32)>,
     /// Per case: region voxels that decide whether it is scored.
     case_voxels: Vec<u64>,
     /// Per case: of those, the ones its session's sensor had in view.
@@ -629,6 +649,7 @@ impl Acc {
             }
         }
         self.removed_voxels.extend(o.removed_voxels);
+        self.lost_voxels.extend(o.lost_voxels);
         for (mine, theirs) in [(&mut self.case_voxels, o.case_voxels), (&mut self.case_in_view, o.case_in_view)] {
             if mine.len() < theirs.len() {
                 mine.resize(theirs.len(), 0);
@@ -719,6 +740,9 @@ pub fn score(
                 let e = acc.permanent_objects_by_object.entry(on.unwrap_or(u32::MAX)).or_default();
                 e[0] += 1;
                 e[1] += s;
+                if !v.is_static {
+                    acc.lost_voxels.push((i, on.unwrap_or(u32::MAX)));
+                }
             }
             if let Some(&o) = l.of.iter().find(|&&o| removed_final[o as usize])
                 && scene.free_of_present(&l, last)
@@ -896,6 +920,19 @@ pub fn score(
             in_view_later,
         })
         .collect();
+    acc.lost_voxels.sort_unstable_by_key(|r| r.0);
+    let lost_voxels = acc
+        .lost_voxels
+        .iter()
+        .map(|&(i, o)| {
+            let object = objects.get(o as usize);
+            LostVoxel {
+                voxel: i,
+                object: object.map(|o| o.id),
+                class: object.map_or_else(|| "ground".to_string(), |o| o.class.clone()),
+            }
+        })
+        .collect();
     let mut removed_by_class = class_counts(classes);
     removed_by_class.sort_by(|a, b| b.static_voxels.cmp(&a.static_voxels).then_with(|| a.class.cmp(&b.class)));
     ChangeScores {
@@ -920,6 +957,7 @@ pub fn score(
         removed_by_category: by_category(&removed_categories),
         removed_by_object,
         removed_voxels,
+        lost_voxels,
         removed_objects: removed_final.iter().filter(|&&r| r).count(),
         appeared_present: Fraction::new(appeared.iter().filter(|a| a.present).count() as u64, seen),
         appeared_static_voxels: Fraction::new(acc.appeared[1], acc.appeared[0]),
@@ -1003,12 +1041,16 @@ pub struct ChangesReport {
     /// [`write_removed_voxels`]).
     #[serde(skip)]
     pub removed_voxels: Vec<RemovedVoxelRow>,
+    /// Metric 1's lost voxels with their map fields (see [`write_lost_voxels`]).
+    #[serde(skip)]
+    pub lost_voxels: Vec<LostVoxelRow>,
 }
 
-/// A removed object's voxel as the map holds it and as the truth places it.
+/// A voxel the metrics single out (`of`: why), as the map holds it and as
+/// the truth places it.
 #[derive(Debug, Clone, PartialEq)]
-pub struct RemovedVoxelRow {
-    pub of: RemovedVoxel,
+pub struct VoxelRow<T> {
+    pub of: T,
     /// As scored: in the truth's frame, static or not, first session.
     pub scored: EvalVoxel,
     pub voxel: MapVoxel,
@@ -1018,37 +1060,80 @@ pub struct RemovedVoxelRow {
     pub category_session: usize,
 }
 
-/// Writes `rows` as CSV, one voxel per line, to find out why a removed
-/// object's voxels stayed in the static map.
-pub fn write_removed_voxels(rows: &[RemovedVoxelRow], out: &mut impl std::io::Write) -> std::io::Result<()> {
-    writeln!(
-        out,
-        "voxel_id,object,class,last_present,static,eps_g,eps_l,category,category_session,first_session,\
-         last_seen_session,seen_free,in_view_later,height_m,truth_x_m,truth_y_m,truth_z_m,x_m,y_m,z_m,points"
-    )?;
-    for r in rows {
-        let v = &r.voxel;
-        let [tx, ty, tz] = r.scored.xyz;
-        let [x, y, z] = v.xyz_m;
-        writeln!(
+/// A removed object's voxel (metric 2's leftovers and the rest).
+pub type RemovedVoxelRow = VoxelRow<RemovedVoxel>;
+/// A permanent-structure voxel missing from the static map (metric 1).
+pub type LostVoxelRow = VoxelRow<LostVoxel>;
+
+/// The columns every voxel row ends with, after its own.
+const VOXEL_COLUMNS: &str = "static,eps_g,eps_l,category,category_session,first_session,last_seen_session,seen_free";
+const PLACE_COLUMNS: &str = "truth_x_m,truth_y_m,truth_z_m,x_m,y_m,z_m,points";
+
+impl<T> VoxelRow<T> {
+    /// From the scored voxel, the map's, and the simulator numbers of its
+    /// last session and of its category's.
+    fn new(of: T, (scored, voxel, last_seen_session, category_session): (EvalVoxel, MapVoxel, usize, usize)) -> Self {
+        VoxelRow { of, scored, voxel, last_seen_session, category_session }
+    }
+
+    fn write_map_fields(&self, out: &mut impl std::io::Write) -> std::io::Result<()> {
+        let v = &self.voxel;
+        write!(
             out,
-            "{},{},{},{},{},{:.4},{:.4},{},{},{},{},{},{},{:.3},{tx:.3},{ty:.3},{tz:.3},{x:.3},{y:.3},{z:.3},{}",
-            v.voxel_id,
-            r.of.object,
-            crate::text::csv_field(&r.of.class),
-            r.of.last_present,
-            r.scored.is_static,
+            "{},{:.4},{:.4},{},{},{},{},{}",
+            self.scored.is_static,
             v.eps_g,
             v.eps_l,
             v.category.as_str(),
-            r.category_session,
-            r.scored.first_session,
-            r.last_seen_session,
-            r.scored.seen_free,
-            r.of.in_view_later.map_or(String::new(), |b| b.to_string()),
-            r.of.height_m,
-            v.points,
+            self.category_session,
+            self.scored.first_session,
+            self.last_seen_session,
+            self.scored.seen_free,
+        )
+    }
+
+    fn write_place(&self, out: &mut impl std::io::Write) -> std::io::Result<()> {
+        let [tx, ty, tz] = self.scored.xyz;
+        let [x, y, z] = self.voxel.xyz_m;
+        writeln!(out, "{tx:.3},{ty:.3},{tz:.3},{x:.3},{y:.3},{z:.3},{}", self.voxel.points)
+    }
+}
+
+/// Writes `rows` as CSV, one voxel per line, to find out why a removed
+/// object's voxels stayed in the static map.
+pub fn write_removed_voxels(rows: &[RemovedVoxelRow], out: &mut impl std::io::Write) -> std::io::Result<()> {
+    writeln!(out, "voxel_id,object,class,last_present,{VOXEL_COLUMNS},in_view_later,height_m,{PLACE_COLUMNS}")?;
+    for r in rows {
+        write!(
+            out,
+            "{},{},{},{},",
+            r.voxel.voxel_id,
+            r.of.object,
+            crate::text::csv_field(&r.of.class),
+            r.of.last_present
         )?;
+        r.write_map_fields(out)?;
+        write!(out, ",{},{:.3},", r.of.in_view_later.map_or(String::new(), |b| b.to_string()), r.of.height_m)?;
+        r.write_place(out)?;
+    }
+    Ok(())
+}
+
+/// Writes `rows` as CSV, one voxel per line, to find out what permanent
+/// structure a rule took out of the static map (`object` empty: ground).
+pub fn write_lost_voxels(rows: &[LostVoxelRow], out: &mut impl std::io::Write) -> std::io::Result<()> {
+    writeln!(out, "voxel_id,object,class,{VOXEL_COLUMNS},{PLACE_COLUMNS}")?;
+    for r in rows {
+        write!(
+            out,
+            "{},{},{},",
+            r.voxel.voxel_id,
+            r.of.object.map_or(String::new(), |o| o.to_string()),
+            crate::text::csv_field(&r.of.class)
+        )?;
+        r.write_map_fields(out)?;
+        out.write_all(b",")?;
+        r.write_place(out)?;
     }
     Ok(())
 }
@@ -1281,20 +1366,13 @@ pub fn changes_report(store: &Store, gt_dir: &Path, cfg: &ChangeEvalConfig) -> R
             .min_by(f64::total_cmp);
     }
     let last_session = name_of.get(&state.session_id.0).copied().unwrap_or_default().to_string();
-    let removed_voxels = scores
-        .removed_voxels
-        .iter()
-        .map(|r| {
-            let m = &map.voxels[r.voxel];
-            RemovedVoxelRow {
-                of: r.clone(),
-                scored: voxels[r.voxel],
-                voxel: *m,
-                last_seen_session: number_of.get(&m.last_seen_session).copied().unwrap_or(0),
-                category_session: number_of.get(&m.category_session).copied().unwrap_or(0),
-            }
-        })
-        .collect();
+    let row = |i: usize| {
+        let m = &map.voxels[i];
+        let session = |id: &i64| number_of.get(id).copied().unwrap_or(0);
+        (voxels[i], *m, session(&m.last_seen_session), session(&m.category_session))
+    };
+    let removed_voxels = scores.removed_voxels.iter().map(|r| VoxelRow::new(r.clone(), row(r.voxel))).collect();
+    let lost_voxels = scores.lost_voxels.iter().map(|r| VoxelRow::new(r.clone(), row(r.voxel))).collect();
     Ok(ChangesReport {
         voxel_m: state.voxel_m,
         graph_version: state.graph_version,
@@ -1307,6 +1385,7 @@ pub fn changes_report(store: &Store, gt_dir: &Path, cfg: &ChangeEvalConfig) -> R
         goals: goals(&scores),
         scores,
         removed_voxels,
+        lost_voxels,
     })
 }
 
@@ -1390,6 +1469,10 @@ mod tests {
         let classes: Vec<(&str, u64, u64)> =
             s.permanent_by_class.iter().map(|c| (c.class.as_str(), c.voxels, c.static_voxels)).collect();
         assert_eq!(classes, [("wall", wall_n + 1, wall_n), ("ground", ground_n, ground_n)]);
+        // The lost list holds that one wall voxel, named by its object.
+        let lost: Vec<(usize, Option<u32>, &str)> =
+            s.lost_voxels.iter().map(|l| (l.voxel, l.object, l.class.as_str())).collect();
+        assert_eq!(lost, [(voxels.len() - 1, Some(1), "wall")]);
         // The container appeared in session 2 and is all static: present.
         assert_eq!(s.appeared_present, Fraction::new(1, 1));
         assert_eq!(s.appeared[0].voxels, 10 * 8 * 8);
