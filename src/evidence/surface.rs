@@ -179,6 +179,12 @@ pub fn plane_normal(spread: &Sym3, points: u32) -> Option<[f64; 3]> {
 /// `|n_z|` from which a plane counts as ground (within about 37° of level).
 const GROUND_NORMAL_MIN_Z: f64 = 0.8;
 
+/// Whether a voxel's points lie on a plane within about 37° of level
+/// ([`plane_normal`], `|n_z|` ≥ 0.8): ground, a slab's underside, a roof.
+pub fn is_level_plane(spread: &Sym3, points: u32) -> bool {
+    plane_normal(spread, points).is_some_and(|n| n[2].abs() >= GROUND_NORMAL_MIN_Z)
+}
+
 impl MapPatch {
     /// Whether this voxel's points may be ground, or too few to tell: fewer
     /// than three, no spread stored, or a plane within about 37° of level.
@@ -187,7 +193,7 @@ impl MapPatch {
         if self.points < 3 || self.spread_m2.iter().any(|c| !c.is_finite()) {
             return true;
         }
-        plane_normal(&self.spread_m2, self.points).is_some_and(|n| n[2].abs() >= GROUND_NORMAL_MIN_Z)
+        is_level_plane(&self.spread_m2, self.points)
     }
 }
 
