@@ -242,6 +242,30 @@ pub struct EvidenceConfig {
     /// 6.76 %, VLP-16 99.21 / 9.52 → 99.33 / 9.47 %, Avia 99.43 / 39.78 →
     /// 99.73 / 39.88 %.
     pub map_ground_crossing: bool,
+    /// The ceiling's clearance also for rays that end next to an earlier
+    /// session's map voxel whose points lie on a level plane
+    /// ([`super::surface::is_level_plane`]) and whose top is above the
+    /// lowest sensor origin by `CLEARANCE_MIN_DROP_M`: a ceiling the map
+    /// knows. `ceiling_clearance` asks this session's own points around the
+    /// endpoint to make a level plane, which a VLP-16's one ring there does
+    /// not, and its rays rising under a slab freed the underside's voxels
+    /// (then change detection took them out of the static map). Needs
+    /// `ceiling_clearance`.
+    ///
+    /// Measured with `bench/change_sites.py` (2026-12-08, 5 × 150 keyframes;
+    /// permanent structure static / removed objects' voxels left, off → on):
+    /// OS1-64 99.31 / 3.73 → 99.41 / 3.75 %, HDL-64E 99.29 / 3.12 → 99.29 /
+    /// 3.13, HDL-32E 98.93 / 3.84 → 99.16 / 3.86, VLP-16 99.08 / 4.48 →
+    /// 99.40 / 4.50, Avia 99.68 / 36.63 → 99.69 / 36.74; appeared objects,
+    /// movers and events unchanged. On the VLP-16 site the building's voxels
+    /// taken out by session 5's free evidence went from 2,313 (2,164 of them
+    /// the underside of a slab at 4 m) to 410 (`seam eval changes
+    /// --lost-voxels`). Giving such map voxels their patch instead (freed
+    /// only by rays crossing their plane, as `map_ground_crossing` does for
+    /// the ground) kept more (OS1-64 99.46 %, VLP-16 99.33 %) but left a
+    /// removed scaffold's decks, which only rays into the sky would cross:
+    /// removed left 6.48 % and 7.73 %.
+    pub map_ceiling_clearance: bool,
     /// Whether a keyframe's hits at ground level below a voxel (the layer
     /// beneath, `evidence::ground`) guard that voxel as `free_guard_voxels`
     /// says. false: they do not. The ground next to where a mover stood is
@@ -568,6 +592,7 @@ impl Default for EvidenceConfig {
             clearance_near_ground_only: true,
             ceiling_clearance: true,
             map_ground_crossing: true,
+            map_ceiling_clearance: true,
             ground_hits_guard: false,
             free_test: FreeTest::Surface,
             one_ray_per_voxel: true,

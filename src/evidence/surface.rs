@@ -435,15 +435,18 @@ impl SurfaceShapes {
         let unoccupied = |p: &&MapPatch| index.find(interest, p.key).is_some_and(|i| moments[i].n == 0);
         let from_map: Vec<(u64, VoxelShape)> = if cfg.map_patches {
             map.par_iter().filter(unoccupied).filter_map(|p| Some((p.key, map_shape(p)?))).collect()
-        } else if cfg.map_ground_crossing {
-            let ground = map_ground_keys(map);
-            map.par_iter()
-                .filter(|p| ground.binary_search(&p.key).is_ok() && p.maybe_ground())
-                .filter(unoccupied)
-                .map(|p| (p.key, map_ground_shape(p, voxel_m, cfg)))
-                .collect()
         } else {
-            Vec::new()
+            let mut out: Vec<(u64, VoxelShape)> = Vec::new();
+            if cfg.map_ground_crossing {
+                let ground = map_ground_keys(map);
+                out = map
+                    .par_iter()
+                    .filter(|p| ground.binary_search(&p.key).is_ok() && p.maybe_ground())
+                    .filter(unoccupied)
+                    .map(|p| (p.key, map_ground_shape(p, voxel_m, cfg)))
+                    .collect();
+            }
+            out
         };
         let (mut keys, mut shapes): (Vec<u64>, Vec<VoxelShape>) = interest
             .par_iter()
@@ -466,7 +469,13 @@ impl SurfaceShapes {
         }
         let index = KeyIndex::new(&keys, &Box3::of_packed(&keys));
         let level = if cfg.ceiling_clearance {
-            level_keys(interest, &moments, &index_of_interest, voxel_m, level_above_m)
+            let mut level = level_keys(interest, &moments, &index_of_interest, voxel_m, level_above_m);
+            if cfg.map_ceiling_clearance {
+                level.extend(map_ceiling_keys(map, voxel_m, level_above_m));
+                level.par_sort_unstable();
+                level.dedup();
+            }
+            level
         } else {
             Vec::new()
         };
@@ -531,6 +540,27 @@ fn level_keys(interest: &[u64], moments: &[Moments], index: &KeyIndex, voxel_m: 
         })
         .map(|(&k, _)| k)
         .collect()
+}
+
+/// The packed keys (sorted) of the earlier sessions' map voxels whose
+/// points lie on a level plane ([`is_level_plane`]), of those whose top
+/// lies above `above_m`, and of their 26 neighbours: where a ray ends on a
+/// ceiling the map knows (`EvidenceConfig::map_ceiling_clearance`).
+fn map_ceiling_keys(map: &[MapPatch], voxel_m: f64, above_m: f64) -> Vec<u64> {
+    let mut keys: Vec<u64> = map
+        .par_iter()
+        .filter(|p| (unpack(p.key).0[2] as f64 + 1.0) * voxel_m > above_m && is_level_plane(&p.spread_m2, p.points))
+        .flat_map_iter(|p| {
+            let c = unpack(p.key).0;
+            (0..27).filter_map(move |d| {
+                let o = [d % 3 - 1, d / 3 % 3 - 1, d / 9 - 1];
+                pack(crate::geometry::VoxelKey(std::array::from_fn(|a| c[a] + o[a])))
+            })
+        })
+        .collect();
+    keys.par_sort_unstable();
+    keys.dedup();
+    keys
 }
 
 #[cfg(test)]
@@ -828,6 +858,46 @@ mod tests {
         let slope: Vec<[f64; 3]> = crest.iter().map(|p| [p[0] + 1.0, p[1], p[2] - 0.2]).collect();
         let uneven = [map_patch(&crest, v), map_patch(&slope, v)];
         assert_eq!(freed(&on, &uneven, robot, downslope), 0);
+    }
+
+    /// A ceiling the map knows: a ray from a sensor 1.8 m up rising to a
+    /// slab's underside 16 m off passes 12-14 cm under an earlier session's
+    /// points of that underside 15 m off (level, at z 3.96) inside their
+    /// voxel, and freed it. This session's one point there makes no plane
+    /// (a VLP-16's one ring), so the ceiling's clearance did not apply; with
+    /// the map's level voxels around the endpoint it does. A ray up through
+    /// the slab's old place from beneath still frees it, and below the
+    /// lowest sensor's level (`level_above_m`) the rule does not apply.
+    #[test]
+    fn rays_ending_on_a_ceiling_the_map_knows_do_not_free_its_underside() {
+        use super::super::grid::InterestEvidence;
+        let on = EvidenceConfig::default();
+        assert!(on.map_ceiling_clearance, "the default");
+        let off = EvidenceConfig { map_ceiling_clearance: false, ..Default::default() };
+        let v = on.voxel_size_m;
+        let at = |x: f64, z: f64| -> Vec<[f64; 3]> {
+            (0..25).map(|i| [x - 0.08 + 0.04 * (i % 5) as f64, 0.02 + 0.04 * (i / 5) as f64, z]).collect()
+        };
+        // The underside where the ray passes and where it ends, and the
+        // floor beneath (so neither is the map's ground level).
+        let map = [map_patch(&at(15.1, 3.96), v), map_patch(&at(16.1, 3.96), v), map_patch(&at(15.1, 0.02), v)];
+        let freed = |cfg: &EvidenceConfig, origin: [f64; 3], end: [f64; 3], level_above_m: f64| {
+            let mut keys: Vec<u64> = map.iter().map(|p| p.key).collect();
+            keys.extend(packed_key(&end, v));
+            keys.sort_unstable();
+            keys.dedup();
+            let scan = vec![end];
+            let shapes = SurfaceShapes::build(&keys, [scan.clone()].into_iter(), v, &map, level_above_m, cfg);
+            let mut ev = InterestEvidence::new(keys.clone(), v);
+            ev.add_keyframe(&origin, &scan, 3, cfg, Some(&shapes));
+            ev.get(map[0].key).unwrap().free_n
+        };
+        let (sensor, farther_in) = ([0.0, 0.1, 1.8], [16.0, 0.1, 3.95]);
+        assert_eq!(freed(&off, sensor, farther_in, 2.3), 1, "the rising ray freed the underside");
+        assert_eq!(freed(&on, sensor, farther_in, 2.3), 0);
+        let (beneath, above) = ([15.1, 0.1, 1.8], [15.1, 0.1, 8.0]);
+        assert_eq!(freed(&on, beneath, above, 2.3), 1, "a ray through the old slab frees it");
+        assert_eq!(freed(&on, sensor, farther_in, 4.5), 1, "no ceiling below the sensors");
     }
 
     /// The ceiling's clearance: rays rising to a slab's underside at
