@@ -806,6 +806,22 @@ mod tests {
         }
     }
 
+    /// The free evidence one ray from `origin` to `end` (the keyframe's one
+    /// point) leaves at `map[0]`, with `map` as the earlier sessions' voxels.
+    fn map_free_n(cfg: &EvidenceConfig, map: &[MapPatch], origin: [f64; 3], end: [f64; 3], level_above_m: f64) -> u32 {
+        use super::super::grid::InterestEvidence;
+        let v = cfg.voxel_size_m;
+        let mut keys: Vec<u64> = map.iter().map(|p| p.key).collect();
+        keys.extend(packed_key(&end, v));
+        keys.sort_unstable();
+        keys.dedup();
+        let scan = vec![end];
+        let shapes = SurfaceShapes::build(&keys, [scan.clone()].into_iter(), v, map, level_above_m, cfg);
+        let mut ev = InterestEvidence::new(keys.clone(), v);
+        ev.add_keyframe(&origin, &scan, 3, cfg, Some(&shapes));
+        ev.get(map[0].key).unwrap().free_n
+    }
+
     /// The map's ground needs crossing: a sensor 0.6 m up (a legged robot)
     /// casts a ray to the ground 20 m off, on a downslope 0.1 m below, and
     /// at 15 m passes 3 cm over an earlier session's ground on a crest
@@ -818,7 +834,6 @@ mod tests {
     /// columns up to a metre around, is not affected.
     #[test]
     fn grazing_rays_do_not_free_the_maps_ground_they_pass_over() {
-        use super::super::grid::InterestEvidence;
         let on = EvidenceConfig::default();
         assert!(on.map_ground_crossing, "the default");
         let off = EvidenceConfig { map_ground_crossing: false, ..Default::default() };
@@ -826,15 +841,7 @@ mod tests {
         let crest: Vec<[f64; 3]> =
             (0..25).map(|i| [15.02 + 0.04 * (i % 5) as f64, 0.02 + 0.04 * (i / 5) as f64, 0.04]).collect();
         let freed = |cfg: &EvidenceConfig, map: &[MapPatch], origin: [f64; 3], end: [f64; 3]| {
-            let mut keys: Vec<u64> = map.iter().map(|p| p.key).collect();
-            keys.extend(packed_key(&end, v));
-            keys.sort_unstable();
-            keys.dedup();
-            let scan = vec![end];
-            let shapes = SurfaceShapes::build(&keys, [scan.clone()].into_iter(), v, map, f64::NEG_INFINITY, cfg);
-            let mut ev = InterestEvidence::new(keys.clone(), v);
-            ev.add_keyframe(&origin, &scan, 3, cfg, Some(&shapes));
-            ev.get(map[0].key).unwrap().free_n
+            map_free_n(cfg, map, origin, end, f64::NEG_INFINITY)
         };
         let map = [map_patch(&crest, v)];
         let (robot, downslope) = ([0.0, 0.1, 0.6], [20.0, 0.1, -0.1]);
@@ -870,7 +877,6 @@ mod tests {
     /// lowest sensor's level (`level_above_m`) the rule does not apply.
     #[test]
     fn rays_ending_on_a_ceiling_the_map_knows_do_not_free_its_underside() {
-        use super::super::grid::InterestEvidence;
         let on = EvidenceConfig::default();
         assert!(on.map_ceiling_clearance, "the default");
         let off = EvidenceConfig { map_ceiling_clearance: false, ..Default::default() };
@@ -882,15 +888,7 @@ mod tests {
         // floor beneath (so neither is the map's ground level).
         let map = [map_patch(&at(15.1, 3.96), v), map_patch(&at(16.1, 3.96), v), map_patch(&at(15.1, 0.02), v)];
         let freed = |cfg: &EvidenceConfig, origin: [f64; 3], end: [f64; 3], level_above_m: f64| {
-            let mut keys: Vec<u64> = map.iter().map(|p| p.key).collect();
-            keys.extend(packed_key(&end, v));
-            keys.sort_unstable();
-            keys.dedup();
-            let scan = vec![end];
-            let shapes = SurfaceShapes::build(&keys, [scan.clone()].into_iter(), v, &map, level_above_m, cfg);
-            let mut ev = InterestEvidence::new(keys.clone(), v);
-            ev.add_keyframe(&origin, &scan, 3, cfg, Some(&shapes));
-            ev.get(map[0].key).unwrap().free_n
+            map_free_n(cfg, &map, origin, end, level_above_m)
         };
         let (sensor, farther_in) = ([0.0, 0.1, 1.8], [16.0, 0.1, 3.95]);
         assert_eq!(freed(&off, sensor, farther_in, 2.3), 1, "the rising ray freed the underside");
