@@ -435,18 +435,15 @@ impl SurfaceShapes {
         let unoccupied = |p: &&MapPatch| index.find(interest, p.key).is_some_and(|i| moments[i].n == 0);
         let from_map: Vec<(u64, VoxelShape)> = if cfg.map_patches {
             map.par_iter().filter(unoccupied).filter_map(|p| Some((p.key, map_shape(p)?))).collect()
+        } else if cfg.map_ground_crossing {
+            let ground = map_ground_keys(map);
+            map.par_iter()
+                .filter(|p| ground.binary_search(&p.key).is_ok() && p.maybe_ground())
+                .filter(unoccupied)
+                .map(|p| (p.key, map_ground_shape(p, voxel_m, cfg)))
+                .collect()
         } else {
-            let mut out: Vec<(u64, VoxelShape)> = Vec::new();
-            if cfg.map_ground_crossing {
-                let ground = map_ground_keys(map);
-                out = map
-                    .par_iter()
-                    .filter(|p| ground.binary_search(&p.key).is_ok() && p.maybe_ground())
-                    .filter(unoccupied)
-                    .map(|p| (p.key, map_ground_shape(p, voxel_m, cfg)))
-                    .collect();
-            }
-            out
+            Vec::new()
         };
         let (mut keys, mut shapes): (Vec<u64>, Vec<VoxelShape>) = interest
             .par_iter()
@@ -509,14 +506,13 @@ impl SurfaceShapes {
 
 /// The packed keys (sorted, among `interest`) of the voxels that hold
 /// points whose 3×3×3 neighbourhood's points lie on a level plane
-/// ([`plane_normal`]'s test, `|n_z|` ≥ [`GROUND_NORMAL_MIN_Z`]), of those
-/// whose top lies above `above_m`.
+/// ([`is_level_plane`]), of those whose top lies above `above_m`.
 fn level_keys(interest: &[u64], moments: &[Moments], index: &KeyIndex, voxel_m: f64, above_m: f64) -> Vec<u64> {
     interest
         .par_iter()
         .zip(moments.par_iter())
         .filter(|(_, m)| m.n > 0)
-        .filter(|&(&key, _)| (unpack(key).0[2] as f64 + 1.0) * voxel_m > above_m)
+        .filter(|&(&key, _)| top_above(key, voxel_m, above_m))
         .filter(|&(&key, _)| {
             let c = unpack(key).0;
             let mut sum = Moments::default();
@@ -535,32 +531,26 @@ fn level_keys(interest: &[u64], moments: &[Moments], index: &KeyIndex, voxel_m: 
                 return false;
             }
             let (_, cov) = sum.mean_and_spread();
-            let cov = cov.map(|x| x as f32);
-            plane_normal(&cov, sum.n).is_some_and(|n| n[2].abs() >= GROUND_NORMAL_MIN_Z)
+            is_level_plane(&cov.map(|x| x as f32), sum.n)
         })
         .map(|(&k, _)| k)
         .collect()
 }
 
-/// The packed keys (sorted) of the earlier sessions' map voxels whose
-/// points lie on a level plane ([`is_level_plane`]), of those whose top
-/// lies above `above_m`, and of their 26 neighbours: where a ray ends on a
-/// ceiling the map knows (`EvidenceConfig::map_ceiling_clearance`).
+/// Whether the top of voxel `key` (packed) lies above `above_m` (world z).
+fn top_above(key: u64, voxel_m: f64, above_m: f64) -> bool {
+    (unpack(key).0[2] as f64 + 1.0) * voxel_m > above_m
+}
+
+/// The packed keys (unsorted, with repeats) of the earlier sessions' map
+/// voxels whose points lie on a level plane ([`is_level_plane`]), of those
+/// whose top lies above `above_m`, and of their 26 neighbours: where a ray
+/// ends on a ceiling the map knows (`EvidenceConfig::map_ceiling_clearance`).
 fn map_ceiling_keys(map: &[MapPatch], voxel_m: f64, above_m: f64) -> Vec<u64> {
-    let mut keys: Vec<u64> = map
-        .par_iter()
-        .filter(|p| (unpack(p.key).0[2] as f64 + 1.0) * voxel_m > above_m && is_level_plane(&p.spread_m2, p.points))
-        .flat_map_iter(|p| {
-            let c = unpack(p.key).0;
-            (0..27).filter_map(move |d| {
-                let o = [d % 3 - 1, d / 3 % 3 - 1, d / 9 - 1];
-                pack(crate::geometry::VoxelKey(std::array::from_fn(|a| c[a] + o[a])))
-            })
-        })
-        .collect();
-    keys.par_sort_unstable();
-    keys.dedup();
-    keys
+    map.par_iter()
+        .filter(|p| top_above(p.key, voxel_m, above_m) && is_level_plane(&p.spread_m2, p.points))
+        .flat_map_iter(|p| std::iter::once(p.key).chain(unpack(p.key).neighbours(1).filter_map(|(_, k)| pack(k))))
+        .collect()
 }
 
 #[cfg(test)]
